@@ -1,0 +1,48 @@
+"""jmse_jax: a differentiable JAX merit for computational-imaging lens design.
+
+The JMSE (Stork & Robinson 2008) is the mean-squared error an image keeps after Wiener
+restoration; this package evaluates it by quadrature over the sensor band with the OTF
+computed only at the quadrature nodes (Berkner & Shroff, "Rethinking sampling topologies for
+image quality estimation in Computational Imaging system design").
+"""
+
+from ._aberrations import (
+    AbstractAberrations as AbstractAberrations,
+    Seidel as Seidel,
+    Zernike as Zernike,
+    noll_to_nm as noll_to_nm,
+    wavefront as wavefront,
+)
+from ._merit import (
+    PRESETS as PRESETS,
+    baseline_jmse as baseline_jmse,
+    jmse as jmse,
+    jmse_options as jmse_options,
+)
+from ._otf import (
+    diffraction_limited_otf as diffraction_limited_otf,
+    otf as otf,
+    otf_fft_grid as otf_fft_grid,
+)
+from ._pupil import (
+    PolarGrid as PolarGrid,
+    SquareGrid as SquareGrid,
+    sample_opd as sample_opd,
+    zernike_fit as zernike_fit,
+)
+from ._quadrature import (
+    QUADRATURES as QUADRATURES,
+    frequency_quadrature as frequency_quadrature,
+)
+from ._spectra import (
+    AbstractNoise as AbstractNoise,
+    AbstractSignal as AbstractSignal,
+    MarkovSignal as MarkovSignal,
+    PowerLawSignal as PowerLawSignal,
+    WhiteNoise as WhiteNoise,
+    WhiteSignal as WhiteSignal,
+    error_spectral_density as error_spectral_density,
+    wiener_filter as wiener_filter,
+)
+
+__version__ = "0.1.0"

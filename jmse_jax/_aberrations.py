@@ -1,0 +1,206 @@
+"""Wavefront models: Seidel (field-dependent) and Noll-indexed Zernike coefficients.
+
+Conventions (SPEC §2): pupil coordinates normalised to the pupil radius, polar angle
+``theta`` measured from the +y axis (``y = rho cos theta``, ``x = rho sin theta``), field
+point on the +y axis at fractional height ``field``; the wavefront is in waves.
+"""
+
+from __future__ import annotations
+
+import abc
+import functools
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._numerics import check_count, common_dtype
+
+__all__ = ["AbstractAberrations", "Seidel", "Zernike", "noll_to_nm", "wavefront"]
+
+
+class AbstractAberrations(eqx.Module):
+    """A wavefront model ``W(x, y; field)`` in waves over the normalised pupil."""
+
+    @abc.abstractmethod
+    def __call__(self, x, y, field):
+        """Wavefront in waves at pupil points ``(x, y)`` for fractional field height ``field``."""
+
+    @property
+    @abc.abstractmethod
+    def x_symmetric(self) -> bool:
+        """True when ``W(-x, y) = W(x, y)`` for every coefficient value (a static property).
+
+        Then ``H(-nu_x, nu_y) = H(nu_x, nu_y)`` and one quadrant of the band suffices.
+        """
+
+
+class Seidel(AbstractAberrations):
+    """Primary (Seidel) wavefront coefficients in waves, for a field point on the +y axis.
+
+    .. math::
+
+        W = w_{020}\\rho^2 + w_{040}\\rho^4 + w_{131} h \\rho^2 y + w_{222} h^2 y^2
+            + w_{220} h^2 \\rho^2 + w_{311} h^3 y + w_{111} h y
+
+    Parameters
+    ----------
+    w020, w040, w131, w222, w220, w311, w111 : float [waves]
+        Defocus, spherical, coma, astigmatism, (sagittal) field curvature, distortion and
+        tilt. Every coefficient is a differentiable leaf.
+
+    Examples
+    --------
+    >>> import jmse_jax
+    >>> ab = jmse_jax.Seidel(w020=-2.75, w040=1.5578)
+    >>> float(jmse_jax.wavefront(ab, 0.0, 1.0, 0.0))  # -2.75 + 1.5578
+    -1.1922
+    """
+
+    w020: jax.Array | float = 0.0
+    w040: jax.Array | float = 0.0
+    w131: jax.Array | float = 0.0
+    w222: jax.Array | float = 0.0
+    w220: jax.Array | float = 0.0
+    w311: jax.Array | float = 0.0
+    w111: jax.Array | float = 0.0
+
+    def __call__(self, x, y, field):
+        rho2 = x * x + y * y
+        h = field
+        h2 = h * h
+        radial = (self.w020 + self.w220 * h2) + self.w040 * rho2
+        linear_y = self.w131 * h * rho2 + self.w311 * h2 * h + self.w111 * h
+        return rho2 * radial + y * linear_y + self.w222 * h2 * y * y
+
+    @property
+    def x_symmetric(self) -> bool:
+        return True
+
+
+def noll_to_nm(j: int) -> tuple[int, int]:
+    """Radial order ``n`` and signed azimuthal order ``m`` of Noll index ``j >= 1``.
+
+    ``m > 0`` is the ``cos(m theta)`` term (even ``j``), ``m < 0`` the ``sin`` term (odd ``j``).
+    """
+    check_count("noll index", j)
+    n = int((-1.0 + math.sqrt(8 * (j - 1) + 1)) / 2.0)
+    p = j - n * (n + 1) // 2
+    k = n % 2
+    m = ((p + k) // 2) * 2 - k
+    if m != 0 and j % 2 == 1:
+        m = -m
+    return n, m
+
+
+@functools.lru_cache(maxsize=None)
+def _radial_coefficients(n: int, m: int) -> tuple[float, ...]:
+    """Coefficients of ``R_n^m(rho) / rho^m`` as a polynomial in ``rho**2``, lowest first."""
+    m = abs(m)
+    coeffs = [0.0] * ((n - m) // 2 + 1)
+    for k in range((n - m) // 2 + 1):
+        c = (-1) ** k * math.factorial(n - k)
+        c /= math.factorial(k) * math.factorial((n + m) // 2 - k) * math.factorial((n - m) // 2 - k)
+        coeffs[(n - m) // 2 - k] = c
+    return tuple(coeffs)
+
+
+def zernike_polynomial(j: int, x, y):
+    """Noll-normalised Zernike polynomial ``Z_j`` (unit RMS over the unit disc) at ``(x, y)``.
+
+    ``theta`` is measured from +y, so the even-``j`` (cosine) terms are even in ``x``.
+    """
+    n, m = noll_to_nm(j)
+    rho2 = x * x + y * y
+    radial = jnp.zeros_like(rho2)
+    for c in reversed(_radial_coefficients(n, m)):
+        radial = radial * rho2 + c
+    # rho^|m| e^{i |m| theta} = (y + i x)^|m|, built without dividing by rho.
+    re, im = jnp.ones_like(rho2), jnp.zeros_like(rho2)
+    for _ in range(abs(m)):
+        re, im = re * y - im * x, re * x + im * y
+    if m == 0:
+        return math.sqrt(n + 1) * radial
+    angular = re if m > 0 else im
+    return math.sqrt(2 * (n + 1)) * radial * angular
+
+
+class Zernike(AbstractAberrations):
+    """Wavefront as a sum of Noll-indexed Zernike polynomials, coefficients in waves (RMS).
+
+    The field height is ignored: the coefficients describe one field point.
+
+    Parameters
+    ----------
+    coefficients : array, shape (len(noll),) [waves]
+        Coefficient of each polynomial (its RMS contribution over the pupil).
+    noll : tuple of int (static)
+        Noll indices, default ``1 .. len(coefficients)``.
+
+    Examples
+    --------
+    >>> import jmse_jax
+    >>> ab = jmse_jax.Zernike([0.0, 0.0, 0.0, 0.5], noll=(1, 2, 3, 4))
+    >>> round(float(jmse_jax.wavefront(ab, 0.0, 1.0, 0.0)), 6)  # sqrt(3) * 0.5
+    0.866025
+    """
+
+    coefficients: jax.Array
+    noll: tuple[int, ...] = eqx.field(static=True)
+
+    def __init__(self, coefficients, noll=None):
+        coefficients = jnp.asarray(coefficients, dtype=common_dtype(coefficients))
+        if coefficients.ndim != 1:
+            raise ValueError(
+                f"coefficients must be a 1-D array, got shape {tuple(coefficients.shape)}"
+            )
+        if noll is None:
+            noll = tuple(range(1, coefficients.shape[0] + 1))
+        noll = tuple(int(j) for j in np.atleast_1d(noll))
+        for j in noll:
+            check_count("noll index", j)
+        if len(noll) != coefficients.shape[0]:
+            raise ValueError(
+                f"noll must list one index per coefficient: {len(noll)} indices for "
+                f"{coefficients.shape[0]} coefficients"
+            )
+        self.coefficients = coefficients
+        self.noll = noll
+
+    def __call__(self, x, y, field):
+        del field
+        total = jnp.zeros_like(x * y * self.coefficients[0])
+        for i, j in enumerate(self.noll):
+            total = total + self.coefficients[i] * zernike_polynomial(j, x, y)
+        return total
+
+    @property
+    def x_symmetric(self) -> bool:
+        return all(noll_to_nm(j)[1] >= 0 for j in self.noll)
+
+
+def wavefront(aberrations: AbstractAberrations, x, y, field=0.0):
+    """Wavefront (OPD) in waves at normalised pupil points ``(x, y)``.
+
+    Parameters
+    ----------
+    aberrations : Seidel or Zernike
+    x, y : array [pupil radii]
+        Pupil coordinates; broadcast against each other. Points outside the unit disc are
+        evaluated by the same polynomial (the pupil stop is applied elsewhere).
+    field : float [fraction of full field, 0..1]
+
+    Returns
+    -------
+    array [waves], the broadcast shape of ``x`` and ``y``.
+    """
+    if not isinstance(aberrations, AbstractAberrations):
+        raise TypeError(
+            f"aberrations must be a jmse_jax.Seidel or jmse_jax.Zernike, got {type(aberrations)}"
+        )
+    dtype = common_dtype(aberrations, x, y, field)
+    x = jnp.asarray(x, dtype)
+    y = jnp.asarray(y, dtype)
+    return aberrations(x, y, jnp.asarray(field, dtype))

@@ -1,0 +1,195 @@
+"""NaN-safe primitives, host-side quadrature constants and argument checks.
+
+Everything here is a leaf of the pipeline: no other ``jmse_jax`` module is imported.
+
+The ``safe_*`` functions use the double-``where`` pattern (guard the *input* of the
+singular function, then select the output) so that both values and gradients are finite at
+the singular point; each one is checked by a gradient test at that point.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = [
+    "abs2",
+    "barycentric_matrix",
+    "check_choice",
+    "check_count",
+    "check_finite_tree",
+    "check_range",
+    "common_dtype",
+    "gauss_legendre",
+    "is_concrete",
+    "safe_arccos",
+    "safe_norm",
+    "safe_sqrt",
+]
+
+
+# --------------------------------------------------------------------------------------
+# NaN-safe primitives
+# --------------------------------------------------------------------------------------
+
+
+def safe_sqrt(x):
+    """``sqrt(max(x, 0))`` whose gradient is 0 (not inf/NaN) where ``x <= 0``."""
+    positive = x > 0
+    x_safe = jnp.where(positive, x, jnp.ones_like(x))
+    return jnp.where(positive, jnp.sqrt(x_safe), jnp.zeros_like(x))
+
+
+def safe_norm(x, y):
+    """Euclidean norm ``hypot(x, y)`` with a zero (finite) gradient at the origin."""
+    r2 = x * x + y * y
+    return safe_sqrt(r2)
+
+
+def safe_arccos(x):
+    """``arccos(clip(x, -1, 1))`` with finite gradients at and beyond ``|x| = 1``.
+
+    The true derivative is infinite at ``|x| = 1``; there the gradient is set to 0, which
+    is the right limit wherever the result is multiplied by a quantity vanishing at least
+    like ``sqrt(1 - x**2)`` (as in every use in this package).
+    """
+    inside = jnp.abs(x) < 1
+    x_safe = jnp.where(inside, x, jnp.zeros_like(x))
+    edge = jnp.where(x >= 1, jnp.zeros_like(x), jnp.full_like(x, math.pi))
+    return jnp.where(inside, jnp.arccos(x_safe), edge)
+
+
+def abs2(z):
+    """``|z|**2`` as ``Re(z)**2 + Im(z)**2`` (differentiable at ``z = 0``, unlike ``abs``)."""
+    return jnp.real(z) ** 2 + jnp.imag(z) ** 2
+
+
+def common_dtype(*args):
+    """Floating dtype of the result: the promotion of the inputs (at least float32/64 default)."""
+    leaves = [leaf for arg in args for leaf in jax.tree_util.tree_leaves(arg)]
+    dtype = jnp.result_type(float, *leaves) if leaves else jnp.result_type(float)
+    if jnp.issubdtype(dtype, jnp.complexfloating):
+        dtype = jnp.finfo(dtype).dtype
+    return dtype
+
+
+# --------------------------------------------------------------------------------------
+# Host-side quadrature constants (NumPy float64, cached)
+# --------------------------------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=None)
+def _gauss_legendre_unit(n: int):
+    x, w = np.polynomial.legendre.leggauss(n)
+    x.setflags(write=False)
+    w.setflags(write=False)
+    return x, w
+
+
+def gauss_legendre(n: int, a: float = -1.0, b: float = 1.0):
+    """Gauss–Legendre nodes and weights on ``[a, b]`` (NumPy float64, computed on the host).
+
+    Exact for polynomials of degree ``2 n - 1``.
+    """
+    check_count("n", n)
+    x, w = _gauss_legendre_unit(int(n))
+    half = 0.5 * (b - a)
+    return a + half * (x + 1.0), half * w
+
+
+def barycentric_matrix(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Matrix ``L`` with ``L @ f(source) = p(target)``, ``p`` the polynomial interpolant.
+
+    Barycentric Lagrange interpolation (Berrut & Trefethen 2004) in float64 on the host.
+    Well conditioned for Gauss–Legendre or Chebyshev source nodes.
+    """
+    source = np.asarray(source, dtype=np.float64)
+    target = np.asarray(target, dtype=np.float64)
+    diff = source[:, None] - source[None, :]
+    np.fill_diagonal(diff, 1.0)
+    bary = 1.0 / np.prod(diff, axis=1)
+    delta = target[:, None] - source[None, :]
+    exact = np.isclose(delta, 0.0, rtol=0.0, atol=1e-15)
+    delta = np.where(exact, 1.0, delta)
+    terms = bary[None, :] / delta
+    matrix = terms / terms.sum(axis=1, keepdims=True)
+    rows = exact.any(axis=1)
+    matrix[rows] = exact[rows].astype(np.float64)
+    return matrix
+
+
+# --------------------------------------------------------------------------------------
+# Argument checks (raise ValueError when values are concrete; silent under tracing)
+# --------------------------------------------------------------------------------------
+
+
+def is_concrete(x) -> bool:
+    """True when every leaf of ``x`` has a value now (not a tracer under jit/vmap/grad)."""
+    return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(x))
+
+
+def _describe(value) -> str:
+    arr = np.asarray(value)
+    if arr.ndim == 0:
+        return repr(arr.item())
+    return np.array2string(arr, threshold=6, precision=6)
+
+
+def check_range(
+    name: str,
+    value,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_inclusive: bool = True,
+    high_inclusive: bool = True,
+) -> None:
+    """Raise ``ValueError`` naming ``name`` when a concrete ``value`` is non-finite or out of range.
+
+    Traced values are not checked (their values are unknown at trace time).
+    """
+    if not is_concrete(value):
+        return
+    arr = np.asarray(value, dtype=np.float64)
+    lo = "(" if not low_inclusive else "["
+    hi = ")" if not high_inclusive else "]"
+    allowed = f"{lo}{'-inf' if low is None else low}, {'inf' if high is None else high}{hi}"
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite and in {allowed}, got {_describe(value)}")
+    bad = np.zeros(arr.shape, dtype=bool)
+    if low is not None:
+        bad |= (arr < low) if low_inclusive else (arr <= low)
+    if high is not None:
+        bad |= (arr > high) if high_inclusive else (arr >= high)
+    if np.any(bad):
+        raise ValueError(f"{name} must be in {allowed}, got {_describe(value)}")
+
+
+def check_finite_tree(name: str, tree) -> None:
+    """Raise ``ValueError`` when any concrete float leaf of ``tree`` is NaN or infinite."""
+    for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
+        if not is_concrete(leaf):
+            continue
+        arr = np.asarray(leaf)
+        if np.issubdtype(arr.dtype, np.number) and not np.all(np.isfinite(arr)):
+            where = jax.tree_util.keystr(path)
+            raise ValueError(f"{name}{where} must be finite, got {_describe(arr)}")
+
+
+def check_count(name: str, value, minimum: int = 1) -> None:
+    """Raise ``ValueError`` unless ``value`` is an integer ``>= minimum`` (a static size)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+
+
+def check_choice(name: str, value, choices) -> None:
+    """Raise ``ValueError`` unless ``value`` is one of ``choices``."""
+    if value not in choices:
+        options = ", ".join(repr(c) for c in choices)
+        raise ValueError(f"{name} must be one of {options}, got {value!r}")

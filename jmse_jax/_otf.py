@@ -1,0 +1,273 @@
+"""Optical transfer function at arbitrary frequency nodes: three engines.
+
+``H(nu) = (1/pi) \\iint P(xi + nu) P*(xi - nu) d^2 xi`` with ``P = circ(rho) exp(i 2 pi W)``
+(SPEC §2), so ``H(0) = 1``, ``H = 0`` for ``|nu| >= 1``, and a tilt ``W = a y`` gives
+``H = exp(i 4 pi a nu_y) H_0``.
+
+Engines
+-------
+``"overlap"``
+    The autocorrelation integral evaluated directly at each node by Gauss quadrature over
+    the lens-shaped overlap of the two shifted discs. With ``s = |nu|``, ``e = nu / s`` and
+    ``e_perp`` the unit vector 90 degrees from ``e``, each half of the lens is parametrised as
+    ``xi = +-(cos(phi) - s) e + t sin(phi) e_perp`` with ``phi in [0, arccos s]``,
+    ``t in [-1, 1]`` and area element ``sin(phi)**2 dphi dt``. The map is analytic and the
+    integrand is entire, so Gauss–Legendre converges spectrally for every ``s`` (no square
+    root at the lens tips, no PSF window). The rule is rescaled to the exact lens area, so the
+    aberration-free OTF is exact to rounding at any order.
+``"nudft"``
+    Pupil on a ``B x B`` square grid, PSF by a ``2B``-padded FFT, then the OTF at each node by
+    an explicit (non-uniform) DFT of the PSF. First order in ``1/B`` (staircase pupil edge).
+``"fft"``
+    The baseline: OTF on the uniform FFT lag grid (``nu = k / B``), bilinearly interpolated
+    to the nodes (exact at lag-grid nodes).
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._aberrations import AbstractAberrations
+from ._numerics import (
+    check_choice,
+    check_count,
+    check_finite_tree,
+    check_range,
+    common_dtype,
+    gauss_legendre,
+    safe_arccos,
+    safe_norm,
+    safe_sqrt,
+)
+from ._pupil import SquareGrid
+
+__all__ = ["OTF_METHODS", "diffraction_limited_otf", "otf", "otf_fft_grid", "pupil_psf"]
+
+OTF_METHODS = ("overlap", "nudft", "fft")
+
+# Frequency nodes processed per block by the overlap engine (bounds the working memory to
+# about 8 * 2 * block * n_phi * n_t bytes per temporary).
+_OVERLAP_BLOCK = 2048
+
+
+def diffraction_limited_otf(r):
+    """Aberration-free OTF ``(2/pi)(arccos r - r sqrt(1 - r^2))`` (0 for ``r >= 1``)."""
+    r = jnp.abs(r)
+    value = (2.0 / math.pi) * (safe_arccos(r) - r * safe_sqrt(1.0 - r * r))
+    return jnp.where(r < 1, value, jnp.zeros_like(value))
+
+
+def _check_aberrations(aberrations, field):
+    if not isinstance(aberrations, AbstractAberrations):
+        raise TypeError(
+            f"aberrations must be a jmse_jax.Seidel or jmse_jax.Zernike, got {type(aberrations)}"
+        )
+    check_finite_tree("aberrations", aberrations)
+    check_range("field", field, 0.0, 1.0)
+
+
+# --------------------------------------------------------------------------------------
+# "overlap": direct autocorrelation quadrature
+# --------------------------------------------------------------------------------------
+
+
+def _overlap_rule(n_phi: int, n_t: int):
+    """Unit Gauss rules: ``phi`` fractions on [0, 1] and ``t`` on [-1, 1] (host, float64)."""
+    frac, w_frac = gauss_legendre(n_phi, 0.0, 1.0)
+    t, w_t = gauss_legendre(n_t, -1.0, 1.0)
+    return frac, w_frac, t, w_t
+
+
+def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
+    """Overlap-quadrature OTF at a flat vector of nodes; returns (real, imag)."""
+    frac, w_frac, t, w_t = (jnp.asarray(a, dtype) for a in _overlap_rule(n_phi, n_t))
+    s = safe_norm(nu_x, nu_y)
+    interior = (s > 0) & (s < 1)
+    # Double-where: the singular points s = 0 (direction undefined) and s >= 1 (empty
+    # overlap, infinite d arccos/ds) are computed at a harmless stand-in and selected away.
+    s_safe = jnp.where(interior, s, 0.5)
+    nx = jnp.where(interior, nu_x, 0.5)
+    ny = jnp.where(interior, nu_y, 0.0)
+    ex, ey = nx / s_safe, ny / s_safe  # unit vector along nu
+    phi_max = jnp.arccos(s_safe)
+    phi = phi_max[:, None] * frac[None, :]  # (N, n_phi)
+    sin_phi = jnp.sin(phi)
+    a = jnp.cos(phi) - s_safe[:, None]  # distance from the lens's mid-line
+    radial_w = phi_max[:, None] * w_frac[None, :] * sin_phi**2  # (N, n_phi)
+
+    b = sin_phi[:, :, None] * t[None, None, :]  # (N, n_phi, n_t)
+    re = jnp.zeros_like(s_safe)
+    im = jnp.zeros_like(s_safe)
+    weights = radial_w[:, :, None] * w_t[None, None, :]
+    for side in (1.0, -1.0):
+        ax = side * a[:, :, None]
+        # xi = ax * e + b * e_perp with e_perp = (-ey, ex)
+        xi_x = ax * ex[:, None, None] - b * ey[:, None, None]
+        xi_y = ax * ey[:, None, None] + b * ex[:, None, None]
+        dx, dy = nx[:, None, None], ny[:, None, None]
+        phase = aberrations(xi_x + dx, xi_y + dy, field) - aberrations(xi_x - dx, xi_y - dy, field)
+        angle = (2.0 * math.pi) * phase
+        re = re + jnp.sum(weights * jnp.cos(angle), axis=(1, 2))
+        im = im + jnp.sum(weights * jnp.sin(angle), axis=(1, 2))
+    # Rescale by exact lens area / rule's lens area: exact for the unaberrated pupil.
+    rule_area = 4.0 * jnp.sum(radial_w, axis=1)
+    scale = diffraction_limited_otf(s_safe) / rule_area
+    re = jnp.where(interior, re * scale, jnp.where(s == 0, 1.0, 0.0))
+    im = jnp.where(interior, im * scale, 0.0)
+    return re, im
+
+
+def _otf_overlap(aberrations, nu_x, nu_y, field, nodes):
+    n_phi, n_t = nodes
+    dtype = common_dtype(aberrations, nu_x, nu_y, field)
+    nu_x, nu_y = jnp.broadcast_arrays(jnp.asarray(nu_x, dtype), jnp.asarray(nu_y, dtype))
+    shape = nu_x.shape
+    flat_x, flat_y = nu_x.reshape(-1), nu_y.reshape(-1)
+    field = jnp.asarray(field, dtype)
+    n = flat_x.shape[0]
+    block = max(1, min(n, _OVERLAP_BLOCK * 1024 // (n_phi * n_t)))
+    if n <= block:
+        re, im = _otf_overlap_flat(aberrations, flat_x, flat_y, field, n_phi, n_t, dtype)
+    else:
+        n_blocks = -(-n // block)
+        pad = n_blocks * block - n
+        px = jnp.pad(flat_x, (0, pad)).reshape(n_blocks, block)
+        py = jnp.pad(flat_y, (0, pad)).reshape(n_blocks, block)
+
+        def one_block(xy):
+            return _otf_overlap_flat(aberrations, xy[0], xy[1], field, n_phi, n_t, dtype)
+
+        re, im = jax.lax.map(one_block, (px, py))
+        re, im = re.reshape(-1)[:n], im.reshape(-1)[:n]
+    return jax.lax.complex(re, im).reshape(shape)
+
+
+# --------------------------------------------------------------------------------------
+# Square-grid engines: "nudft" and "fft"
+# --------------------------------------------------------------------------------------
+
+
+def pupil_psf(aberrations, field, B: int, dtype=None):
+    """PSF of the ``B x B`` sampled pupil on the ``2B x 2B`` FFT grid (unnormalised).
+
+    Returns ``|FFT2(P_padded)|**2`` in NumPy FFT order, rows along ``y``, columns along ``x``.
+    """
+    grid = SquareGrid(B)
+    dtype = dtype or common_dtype(aberrations, field)
+    x, y = jnp.asarray(grid.x, dtype), jnp.asarray(grid.y, dtype)
+    inside = jnp.asarray(grid.weights > 0)
+    angle = (2.0 * math.pi) * aberrations(x, y, jnp.asarray(field, dtype))
+    pupil = jnp.where(inside, jax.lax.complex(jnp.cos(angle), jnp.sin(angle)), 0.0)
+    padded = jnp.zeros((2 * B, 2 * B), pupil.dtype).at[:B, :B].set(pupil)
+    spectrum = jnp.fft.fft2(padded)
+    return jnp.real(spectrum) ** 2 + jnp.imag(spectrum) ** 2
+
+
+def otf_fft_grid(aberrations, field, B: int, dtype=None):
+    """Baseline OTF on the ``2B x 2B`` lag grid: ``H[k_y, k_x]`` at ``nu = k / B`` (FFT order).
+
+    Berkner & Shroff Sec. III-A: pupil ``B x B`` -> zero-pad to ``2B`` -> FFT -> PSF -> FFT.
+    Normalised so that ``H[0, 0] = 1``.
+    """
+    psf = pupil_psf(aberrations, field, B, dtype)
+    lag = jnp.fft.ifft2(psf)
+    return lag / jnp.real(lag[0, 0])
+
+
+def _otf_nudft(aberrations, nu_x, nu_y, field, B):
+    dtype = common_dtype(aberrations, nu_x, nu_y, field)
+    nu_x, nu_y = jnp.broadcast_arrays(jnp.asarray(nu_x, dtype), jnp.asarray(nu_y, dtype))
+    psf = pupil_psf(aberrations, field, B, dtype)
+    m = jnp.asarray(np.fft.fftfreq(2 * B, 1.0 / (2 * B)), dtype)  # integer PSF frequencies
+    # Continuous lag tau = nu * B pupil samples; A(tau) = sum_m PSF_m exp(2 pi i m.tau / 2B).
+    scale = (2.0 * math.pi / (2 * B)) * B
+    flat_x, flat_y = nu_x.reshape(-1), nu_y.reshape(-1)
+    ang_x = scale * flat_x[:, None] * m[None, :]  # (N, 2B)
+    ang_y = scale * flat_y[:, None] * m[None, :]
+    ex = jax.lax.complex(jnp.cos(ang_x), jnp.sin(ang_x))
+    ey = jax.lax.complex(jnp.cos(ang_y), jnp.sin(ang_y))
+    rows = ey @ psf.astype(ex.dtype)  # (N, 2B): sum over y frequencies
+    values = jnp.sum(rows * ex, axis=1) / jnp.sum(psf)
+    return values.reshape(nu_x.shape)
+
+
+def _otf_fft(aberrations, nu_x, nu_y, field, B):
+    dtype = common_dtype(aberrations, nu_x, nu_y, field)
+    nu_x, nu_y = jnp.broadcast_arrays(jnp.asarray(nu_x, dtype), jnp.asarray(nu_y, dtype))
+    grid = jnp.fft.fftshift(otf_fft_grid(aberrations, field, B, dtype))  # lags -B .. B-1
+    # Bilinear interpolation in lag units; lag index k maps to array index k + B.
+    kx = jnp.clip(nu_x * B + B, 0.0, 2 * B - 1.0)
+    ky = jnp.clip(nu_y * B + B, 0.0, 2 * B - 1.0)
+    ix0 = jnp.clip(jnp.floor(kx).astype(jnp.int32), 0, 2 * B - 2)
+    iy0 = jnp.clip(jnp.floor(ky).astype(jnp.int32), 0, 2 * B - 2)
+    fx, fy = kx - ix0, ky - iy0
+    g00 = grid[iy0, ix0]
+    g01 = grid[iy0, ix0 + 1]
+    g10 = grid[iy0 + 1, ix0]
+    g11 = grid[iy0 + 1, ix0 + 1]
+    value = (1 - fy) * ((1 - fx) * g00 + fx * g01) + fy * ((1 - fx) * g10 + fx * g11)
+    outside = safe_norm(nu_x, nu_y) >= 1
+    return jnp.where(outside, jnp.zeros_like(value), value)
+
+
+def otf(
+    aberrations: AbstractAberrations,
+    nu_x,
+    nu_y,
+    field=0.0,
+    method: str = "overlap",
+    *,
+    nodes: tuple[int, int] = (32, 32),
+    B: int = 64,
+):
+    """Complex OTF ``H`` of the aberrated pupil at arbitrary frequency nodes.
+
+    Parameters
+    ----------
+    aberrations : Seidel or Zernike [waves]
+    nu_x, nu_y : array [units of the incoherent cutoff 1/(lambda N)]
+        Frequency nodes; broadcast against each other.
+    field : float in [0, 1] [fraction of full field]
+    method : {"overlap", "nudft", "fft"}
+        Engine (see module docstring). ``"overlap"`` is the accurate one.
+    nodes : (int, int)
+        ``(n_phi, n_t)`` Gauss nodes across/along each half of the overlap lens
+        (``"overlap"``). About ``n >= pi * |2 s grad W|_max + 12`` per axis reaches 1e-10.
+    B : int
+        Square pupil grid size (``"nudft"``, ``"fft"``).
+
+    Returns
+    -------
+    complex array, the broadcast shape of ``nu_x`` and ``nu_y``; ``H(0) = 1``.
+
+    Notes
+    -----
+    Differentiable in every float input (coefficients, ``field``, ``nu``); the gradient is
+    finite at ``nu = 0`` (where ``H`` has a cone and the gradient returned is 0) and at
+    ``|nu| = 1``.
+
+    Examples
+    --------
+    >>> import jmse_jax
+    >>> h = jmse_jax.otf(jmse_jax.Seidel(), 0.5, 0.0)
+    >>> round(float(h.real), 8)  # (2/pi)(arccos 0.5 - 0.5 sqrt(0.75))
+    0.39100222
+    """
+    check_choice("method", method, OTF_METHODS)
+    _check_aberrations(aberrations, field)
+    check_range("nu_x", nu_x)
+    check_range("nu_y", nu_y)
+    if method == "overlap":
+        if not (isinstance(nodes, (tuple, list)) and len(nodes) == 2):
+            raise ValueError(f"nodes must be a pair (n_phi, n_t), got {nodes!r}")
+        check_count("nodes[0] (n_phi)", nodes[0])
+        check_count("nodes[1] (n_t)", nodes[1])
+        return _otf_overlap(aberrations, nu_x, nu_y, field, (int(nodes[0]), int(nodes[1])))
+    check_count("B", B)
+    if method == "nudft":
+        return _otf_nudft(aberrations, nu_x, nu_y, field, B)
+    return _otf_fft(aberrations, nu_x, nu_y, field, B)

@@ -1,0 +1,143 @@
+"""Signal and noise power spectra, the Wiener filter and its error spectral density.
+
+Frequencies are in units of the incoherent cutoff ``1/(lambda N)`` (SPEC §2); all signal
+models are isotropic functions of ``r = |nu|``.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._numerics import abs2, check_range, safe_norm
+
+__all__ = [
+    "AbstractNoise",
+    "AbstractSignal",
+    "MarkovSignal",
+    "PowerLawSignal",
+    "WhiteNoise",
+    "WhiteSignal",
+    "error_spectral_density",
+    "wiener_filter",
+]
+
+
+class AbstractSignal(eqx.Module):
+    """An isotropic signal power spectral density ``S_x(nu)``."""
+
+    @abc.abstractmethod
+    def radial(self, r):
+        """``S_x`` at radial frequency ``r = |nu|`` [cutoff units]."""
+
+    def __call__(self, nu_x, nu_y):
+        """``S_x`` at ``(nu_x, nu_y)``."""
+        return self.radial(safe_norm(nu_x, nu_y))
+
+
+class MarkovSignal(AbstractSignal):
+    """Exponentially correlated (first-order Markov) random field.
+
+    ``S_x(r) = variance * 2 pi mu**2 / (1 + (2 pi mu r)**2)**(3/2)``, the spectrum of the
+    autocorrelation ``variance * exp(-|x| / mu)``; it integrates to ``variance`` over the plane.
+
+    Parameters
+    ----------
+    variance : float > 0 [signal units squared]
+    correlation_length : float > 0 [``lambda N`` units, the inverse of the frequency unit]
+    """
+
+    variance: jax.Array | float = 1.0
+    correlation_length: jax.Array | float = 5.0
+
+    def __check_init__(self):
+        check_range("variance", self.variance, 0.0, None, low_inclusive=False)
+        check_range("correlation_length", self.correlation_length, 0.0, None, low_inclusive=False)
+
+    def radial(self, r):
+        mu = self.correlation_length
+        two_pi_mu = 2.0 * math.pi * mu
+        return self.variance * two_pi_mu * mu / (1.0 + (two_pi_mu * r) ** 2) ** 1.5
+
+
+class PowerLawSignal(AbstractSignal):
+    """Power-law (natural-scene) spectrum ``S_x(r) = amplitude / (knee**2 + r**2)**(exponent/2)``.
+
+    Parameters
+    ----------
+    amplitude : float > 0
+    exponent : float > 0 (``gamma``; natural images have about 2)
+    knee : float > 0 [cutoff units] (``nu_0``; keeps ``S_x(0)`` finite)
+    """
+
+    amplitude: jax.Array | float = 1.0
+    exponent: jax.Array | float = 2.0
+    knee: jax.Array | float = 0.01
+
+    def __check_init__(self):
+        check_range("amplitude", self.amplitude, 0.0, None, low_inclusive=False)
+        check_range("exponent", self.exponent, 0.0, None, low_inclusive=False)
+        check_range("knee", self.knee, 0.0, None, low_inclusive=False)
+
+    def radial(self, r):
+        return self.amplitude * (self.knee**2 + r * r) ** (-0.5 * self.exponent)
+
+
+class WhiteSignal(AbstractSignal):
+    """Flat signal spectrum ``S_x = level``."""
+
+    level: jax.Array | float = 1.0
+
+    def __check_init__(self):
+        check_range("level", self.level, 0.0, None, low_inclusive=False)
+
+    def radial(self, r):
+        return jnp.full_like(r, 1.0) * self.level
+
+
+class AbstractNoise(eqx.Module):
+    """A noise power spectral density ``S_n(nu)``."""
+
+    @abc.abstractmethod
+    def __call__(self, nu_x, nu_y):
+        """``S_n`` at ``(nu_x, nu_y)``."""
+
+
+class WhiteNoise(AbstractNoise):
+    """White detector noise ``S_n = variance``.
+
+    Parameters
+    ----------
+    variance : float > 0 [signal units squared, per unit area of the frequency plane]
+    """
+
+    variance: jax.Array | float = 1e-3
+
+    def __check_init__(self):
+        check_range("noise variance", self.variance, 0.0, None, low_inclusive=False)
+
+    def __call__(self, nu_x, nu_y):
+        return jnp.zeros_like(nu_x * nu_y) + self.variance
+
+
+def error_spectral_density(otf, signal_psd, noise_psd):
+    """Error spectral density of the Wiener restoration, ``S_e = S_x S_n / (|H|^2 S_x + S_n)``.
+
+    Berkner & Shroff Eq. (8); ``|H|^2`` is formed as ``Re(H)^2 + Im(H)^2`` so the gradient
+    is finite at OTF zeros.
+
+    Parameters
+    ----------
+    otf : complex array (``H``)
+    signal_psd, noise_psd : arrays broadcastable to ``otf`` (``S_x``, ``S_n``), ``S_n > 0``
+    """
+    return signal_psd * noise_psd / (abs2(otf) * signal_psd + noise_psd)
+
+
+def wiener_filter(otf, signal_psd, noise_psd):
+    """Wiener restoration filter ``G = conj(H) S_x / (|H|^2 S_x + S_n)`` (Eq. 4 of the paper)."""
+    return jnp.conj(otf) * signal_psd / (abs2(otf) * signal_psd + noise_psd)
