@@ -36,6 +36,26 @@ class AbstractAberrations(eqx.Module):
         Then ``H(-nu_x, nu_y) = H(nu_x, nu_y)`` and one quadrant of the band suffices.
         """
 
+    @property
+    def chord_degree(self) -> int | None:
+        """Largest degree in ``t`` of ``W(xi + nu) - W(xi - nu)`` along any line ``xi(t)``.
+
+        For a polynomial wavefront of total degree ``d`` this is at most ``d - 1`` (the
+        top-degree terms cancel). The overlap OTF engine then evaluates the wavefront at only
+        ``chord_degree + 1`` points per chord. ``None`` (the default for models that do not
+        know) makes the engine evaluate the wavefront at every quadrature node.
+        """
+        return None
+
+    def without_tilt(self) -> AbstractAberrations:
+        """The same wavefront less its best-fit tilt (its projection on ``x`` and ``y``).
+
+        A tilt only shifts the PSF: it multiplies the OTF by a unit-modulus phase ramp, so
+        ``|H|`` and every Wiener quantity are unchanged, while the OTF over the band becomes
+        smoother (fewer nodes resolve it). The default returns ``self`` unchanged.
+        """
+        return self
+
 
 class Seidel(AbstractAberrations):
     """Primary (Seidel) wavefront coefficients in waves, for a field point on the +y axis.
@@ -79,6 +99,21 @@ class Seidel(AbstractAberrations):
     def x_symmetric(self) -> bool:
         return True
 
+    def without_tilt(self) -> Seidel:
+        # Least-squares tilt of the y-odd terms: rho^2 y projects onto y with factor 2/3
+        # (int rho^2 y^2 / int y^2 over the unit disc); w311 h^3 y and w111 h y are pure tilt.
+        return Seidel(
+            w020=self.w020, w040=self.w040, w131=self.w131, w222=self.w222, w220=self.w220,
+            w311=jnp.zeros_like(jnp.asarray(self.w311)),
+            w111=-(2.0 / 3.0) * jnp.asarray(self.w131),
+        )
+
+    @property
+    def chord_degree(self) -> int:
+        # Degree 4 wavefront; its only quartic term (rho^4) leaves a difference that is
+        # quadratic along lines perpendicular to nu, but cubic along general lines.
+        return 3
+
 
 def noll_to_nm(j: int) -> tuple[int, int]:
     """Radial order ``n`` and signed azimuthal order ``m`` of Noll index ``j >= 1``.
@@ -95,7 +130,7 @@ def noll_to_nm(j: int) -> tuple[int, int]:
     return n, m
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _radial_coefficients(n: int, m: int) -> tuple[float, ...]:
     """Coefficients of ``R_n^m(rho) / rho^m`` as a polynomial in ``rho**2``, lowest first."""
     m = abs(m)
@@ -179,6 +214,16 @@ class Zernike(AbstractAberrations):
     @property
     def x_symmetric(self) -> bool:
         return all(noll_to_nm(j)[1] >= 0 for j in self.noll)
+
+    @property
+    def chord_degree(self) -> int:
+        return max(0, max(noll_to_nm(j)[0] for j in self.noll) - 1)
+
+    def without_tilt(self) -> Zernike:
+        # Z2 and Z3 are exactly the tilt (the basis is orthogonal over the pupil).
+        keep = jnp.asarray([0.0 if j in (2, 3) else 1.0 for j in self.noll],
+                           self.coefficients.dtype)
+        return Zernike(self.coefficients * keep, noll=self.noll)
 
 
 def wavefront(aberrations: AbstractAberrations, x, y, field=0.0):

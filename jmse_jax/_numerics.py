@@ -82,7 +82,7 @@ def common_dtype(*args):
 # --------------------------------------------------------------------------------------
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _gauss_legendre_unit(n: int):
     x, w = np.polynomial.legendre.leggauss(n)
     x.setflags(write=False)

@@ -25,6 +25,7 @@ Engines
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -33,6 +34,7 @@ import numpy as np
 
 from ._aberrations import AbstractAberrations
 from ._numerics import (
+    barycentric_matrix,
     check_choice,
     check_count,
     check_finite_tree,
@@ -75,16 +77,67 @@ def _check_aberrations(aberrations, field):
 # --------------------------------------------------------------------------------------
 
 
-def _overlap_rule(n_phi: int, n_t: int):
-    """Unit Gauss rules: ``phi`` fractions on [0, 1] and ``t`` on [-1, 1] (host, float64)."""
+@functools.cache
+def _overlap_rule(n_phi: int, n_t: int, chord_points: int):
+    """Host constants of the overlap rule (float64, cached).
+
+    Returns ``frac, w_frac`` (Gauss on [0, 1] for ``phi / phi_max``), ``t_colloc`` (Chebyshev
+    points on [-1, 1] where the phase is evaluated along each chord), ``interp``
+    (``n_t x chord_points`` Lagrange matrix from those points to the Gauss nodes ``t_j``) and
+    ``moment`` (``n_t x chord_points``: ``w_j * interp[j, q]``).
+    """
     frac, w_frac = gauss_legendre(n_phi, 0.0, 1.0)
     t, w_t = gauss_legendre(n_t, -1.0, 1.0)
-    return frac, w_frac, t, w_t
+    q = np.arange(chord_points)
+    t_colloc = np.cos(np.pi * (q + 0.5) / chord_points)[::-1].copy()
+    interp = barycentric_matrix(t_colloc, t)
+    return frac, w_frac, t_colloc, interp, interp * w_t[:, None]
+
+
+@jax.custom_jvp
+def _phase_integral(phase, weights, interp, moment):
+    """``sum_i weights_i sum_j w_j exp(i 2 pi (interp @ phase_i)_j)`` as (real, imag).
+
+    ``phase`` (..., chords, Q) holds the phase difference in waves at the collocation points
+    of each chord and ``weights`` (..., chords) the chord weights; the sum runs over the last
+    two axes of ``phase``. The derivative rule reuses the cosine and sine moments of the
+    primal pass, so the backward pass costs almost nothing (no array of quadrature-node size
+    is stored or recomputed).
+    """
+    cos_m, sin_m = _phase_moments(phase, interp, moment)
+    return _contract(weights, cos_m), _contract(weights, sin_m)
+
+
+def _phase_moments(phase, interp, moment):
+    angle = (2.0 * math.pi) * jnp.einsum("...q,jq->...j", phase, interp)
+    cos_m = jnp.einsum("...j,jq->...q", jnp.cos(angle), moment)
+    sin_m = jnp.einsum("...j,jq->...q", jnp.sin(angle), moment)
+    return cos_m, sin_m
+
+
+def _contract(weights, moments):
+    return jnp.sum(weights * jnp.sum(moments, axis=-1), axis=-1)
+
+
+@_phase_integral.defjvp
+def _phase_integral_jvp(primals, tangents):
+    phase, weights, interp, moment = primals
+    d_phase, d_weights, _, _ = tangents
+    cos_m, sin_m = _phase_moments(phase, interp, moment)
+    re, im = _contract(weights, cos_m), _contract(weights, sin_m)
+    two_pi_w = (2.0 * math.pi) * weights[..., None]
+    d_re = _contract(d_weights, cos_m) - jnp.sum(two_pi_w * sin_m * d_phase, axis=(-2, -1))
+    d_im = _contract(d_weights, sin_m) + jnp.sum(two_pi_w * cos_m * d_phase, axis=(-2, -1))
+    return (re, im), (d_re, d_im)
 
 
 def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
     """Overlap-quadrature OTF at a flat vector of nodes; returns (real, imag)."""
-    frac, w_frac, t, w_t = (jnp.asarray(a, dtype) for a in _overlap_rule(n_phi, n_t))
+    degree = aberrations.chord_degree
+    chord_points = n_t if degree is None or degree + 1 >= n_t else degree + 1
+    frac, w_frac, t_colloc, interp, moment = (
+        jnp.asarray(a, dtype) for a in _overlap_rule(n_phi, n_t, chord_points)
+    )
     s = safe_norm(nu_x, nu_y)
     interior = (s > 0) & (s < 1)
     # Double-where: the singular points s = 0 (direction undefined) and s >= 1 (empty
@@ -96,25 +149,27 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
     phi_max = jnp.arccos(s_safe)
     phi = phi_max[:, None] * frac[None, :]  # (N, n_phi)
     sin_phi = jnp.sin(phi)
-    a = jnp.cos(phi) - s_safe[:, None]  # distance from the lens's mid-line
-    radial_w = phi_max[:, None] * w_frac[None, :] * sin_phi**2  # (N, n_phi)
+    a = jnp.cos(phi) - s_safe[:, None]  # distance of the chord from the lens's mid-line
+    chord_w = phi_max[:, None] * w_frac[None, :] * sin_phi**2  # (N, n_phi)
 
-    b = sin_phi[:, :, None] * t[None, None, :]  # (N, n_phi, n_t)
-    re = jnp.zeros_like(s_safe)
-    im = jnp.zeros_like(s_safe)
-    weights = radial_w[:, :, None] * w_t[None, None, :]
-    for side in (1.0, -1.0):
-        ax = side * a[:, :, None]
-        # xi = ax * e + b * e_perp with e_perp = (-ey, ex)
-        xi_x = ax * ex[:, None, None] - b * ey[:, None, None]
-        xi_y = ax * ey[:, None, None] + b * ex[:, None, None]
-        dx, dy = nx[:, None, None], ny[:, None, None]
-        phase = aberrations(xi_x + dx, xi_y + dy, field) - aberrations(xi_x - dx, xi_y - dy, field)
-        angle = (2.0 * math.pi) * phase
-        re = re + jnp.sum(weights * jnp.cos(angle), axis=(1, 2))
-        im = im + jnp.sum(weights * jnp.sin(angle), axis=(1, 2))
+    # Chord points xi = side * a * e + t sin(phi) * e_perp, e_perp = (-ey, ex), on both halves.
+    side = jnp.asarray([1.0, -1.0], dtype)
+    along = side[None, :, None, None] * a[:, None, :, None]  # (N, 2, n_phi, 1)
+    across = (sin_phi[:, :, None] * t_colloc[None, None, :])[:, None, :, :]  # (N, 1, n_phi, Q)
+    ex4, ey4 = ex[:, None, None, None], ey[:, None, None, None]
+    xi_x = along * ex4 - across * ey4
+    xi_y = along * ey4 + across * ex4
+    dx, dy = nx[:, None, None, None], ny[:, None, None, None]
+    phase = aberrations(xi_x + dx, xi_y + dy, field) - aberrations(xi_x - dx, xi_y - dy, field)
+    weights = jnp.broadcast_to(chord_w[:, None, :], (chord_w.shape[0], 2, n_phi))
+    re, im = _phase_integral(
+        phase.reshape(phase.shape[0], 2 * n_phi, chord_points),
+        weights.reshape(-1, 2 * n_phi),
+        interp,
+        moment,
+    )
     # Rescale by exact lens area / rule's lens area: exact for the unaberrated pupil.
-    rule_area = 4.0 * jnp.sum(radial_w, axis=1)
+    rule_area = 4.0 * jnp.sum(chord_w, axis=1)
     scale = diffraction_limited_otf(s_safe) / rule_area
     re = jnp.where(interior, re * scale, jnp.where(s == 0, 1.0, 0.0))
     im = jnp.where(interior, im * scale, 0.0)

@@ -129,8 +129,8 @@ def zernike_fit(samples, grid: PupilGrid, noll=None) -> Zernike:
         if n_max > 2 * grid.rings - 1 or 2 * m_max >= grid.arms:
             raise ValueError(
                 f"a PolarGrid with rings={grid.rings}, arms={grid.arms} cannot resolve Zernike "
-                f"terms up to n={n_max}, |m|={m_max}: need rings >= {math.ceil((n_max + 1) / 2)} and "
-                f"arms > {2 * m_max}"
+                f"terms up to n={n_max}, |m|={m_max}: need "
+                f"rings >= {math.ceil((n_max + 1) / 2)} and arms > {2 * m_max}"
             )
     dtype = samples.dtype if jnp.issubdtype(samples.dtype, jnp.floating) else jnp.float32
     weighted = samples * jnp.asarray(grid.weights, dtype) / math.pi

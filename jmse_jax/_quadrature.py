@@ -159,7 +159,8 @@ def frequency_quadrature(rule: str, u, p, dtype=None):
         alpha_j = jnp.asarray(alpha, dtype)
         r_max = u / jnp.maximum(jnp.cos(alpha_j), jnp.sin(alpha_j))  # ray length in the square
         r = r_max[:, None] * jnp.asarray(t, dtype)[None, :]
-        w = 4.0 * jnp.asarray(w_alpha, dtype)[:, None] * r_max[:, None] * jnp.asarray(w_t, dtype) * r
+        w_ray = jnp.asarray(w_alpha, dtype)[:, None] * r_max[:, None]
+        w = 4.0 * w_ray * jnp.asarray(w_t, dtype)[None, :] * r
         return (
             (r * jnp.cos(alpha_j)[:, None]).ravel(),
             (r * jnp.sin(alpha_j)[:, None]).ravel(),
