@@ -19,6 +19,11 @@ from ._merit import (
     jmse as jmse,
     jmse_options as jmse_options,
 )
+from ._optimise import (
+    OptimisationResult as OptimisationResult,
+    lens_merit as lens_merit,
+    optimise as optimise,
+)
 from ._otf import (
     diffraction_limited_otf as diffraction_limited_otf,
     otf as otf,
@@ -34,6 +39,16 @@ from ._quadrature import (
     QUADRATURES as QUADRATURES,
     frequency_quadrature as frequency_quadrature,
 )
+from ._simulate import (
+    PIXEL_MSE_PER_JMSE as PIXEL_MSE_PER_JMSE,
+    MonteCarloResult as MonteCarloResult,
+    monte_carlo_mse as monte_carlo_mse,
+    predicted_pixel_mse as predicted_pixel_mse,
+    random_scene as random_scene,
+    restore as restore,
+    sensor_frequencies as sensor_frequencies,
+    simulate_capture as simulate_capture,
+)
 from ._spectra import (
     AbstractNoise as AbstractNoise,
     AbstractSignal as AbstractSignal,
@@ -43,6 +58,17 @@ from ._spectra import (
     WhiteSignal as WhiteSignal,
     error_spectral_density as error_spectral_density,
     wiener_filter as wiener_filter,
+)
+from ._sweep import (
+    SweepResult as SweepResult,
+    SweepStatus as SweepStatus,
+    hypercube as hypercube,
+    sweep as sweep,
+    sweep_jmse as sweep_jmse,
+)
+from .lens import (
+    Lens as Lens,
+    Singlet as Singlet,
 )
 
 __version__ = "0.1.0"

@@ -43,7 +43,7 @@ PRESETS: dict[str, dict] = {
         overlap_nodes=(28, 28),
     ),
     "default": dict(
-        quadrature="polar", nodes=(40, 24), se_nodes=(800, 480), otf_method="overlap",
+        quadrature="polar", nodes=(48, 24), se_nodes=(1200, 720), otf_method="overlap",
         overlap_nodes=(32, 32),
     ),
     "high": dict(
@@ -141,7 +141,7 @@ def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror)
             l_r, l_a = (jnp.asarray(m, dtype) for m in
                         polar_interpolation_matrices(options["nodes"], options["se_nodes"]))
             # Separable interpolation, one axis at a time (real matrices on complex data).
-            h = jnp.matmul(jnp.matmul(l_a, h), l_r.T)
+            h = jnp.matmul(l_a, jnp.matmul(h, l_r.T))
         s_x = signal(panels.nu_x, panels.nu_y)
         s_e = error_spectral_density(h, s_x, noise(panels.nu_x, panels.nu_y))
         s_x_out = signal(panels.outer_nu_x, panels.outer_nu_y)  # H = 0 beyond the cutoff

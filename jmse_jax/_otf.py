@@ -40,6 +40,7 @@ from ._numerics import (
     check_finite_tree,
     check_range,
     common_dtype,
+    cos_sin_2pi,
     gauss_legendre,
     safe_arccos,
     safe_norm,
@@ -109,9 +110,9 @@ def _phase_integral(phase, weights, interp, moment):
 
 
 def _phase_moments(phase, interp, moment):
-    angle = (2.0 * math.pi) * jnp.einsum("...q,jq->...j", phase, interp)
-    cos_m = jnp.einsum("...j,jq->...q", jnp.cos(angle), moment)
-    sin_m = jnp.einsum("...j,jq->...q", jnp.sin(angle), moment)
+    cos_p, sin_p = cos_sin_2pi(jnp.einsum("...q,jq->...j", phase, interp))
+    cos_m = jnp.einsum("...j,jq->...q", cos_p, moment)
+    sin_m = jnp.einsum("...j,jq->...q", sin_p, moment)
     return cos_m, sin_m
 
 

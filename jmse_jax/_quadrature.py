@@ -64,6 +64,46 @@ def _axis_rule(rule: str, p: int):
     return x, w
 
 
+#: Radial panel edges of the polar rule in ``t = r / R`` and the share of nodes in each.
+_RADIAL_EDGES = (0.0, 0.15, 0.4, 1.0)
+_RADIAL_SHARES = (0.3, 0.3, 0.4)
+
+
+def _radial_counts(n: int) -> tuple[int, ...]:
+    """Nodes per radial panel for ``n`` in total (each panel gets at least one)."""
+    counts = [max(1, round(n * share)) for share in _RADIAL_SHARES[:-1]]
+    counts.append(max(1, n - sum(counts)))
+    return tuple(counts)
+
+
+def _radial_rule(n: int):
+    """Composite Gauss rule in ``t`` on [0, 1] over ``_RADIAL_EDGES`` (host, float64).
+
+    A strongly aberrated OTF falls from 1 to nearly 0 within a few hundredths of the cutoff
+    around ``nu = 0`` and then ripples slowly; a separate inner panel keeps that steep part
+    from spoiling the polynomial interpolation over the rest of the ray.
+    """
+    nodes, weights = [], []
+    for (a, b), k in zip(zip(_RADIAL_EDGES[:-1], _RADIAL_EDGES[1:]), _radial_counts(n)):
+        x, w = gauss_legendre(k, a, b)
+        nodes.append(x)
+        weights.append(w)
+    return np.concatenate(nodes), np.concatenate(weights)
+
+
+def _radial_interpolation(n_coarse: int, n_fine: int) -> np.ndarray:
+    """Block-diagonal interpolation matrix between composite radial rules (per panel)."""
+    coarse, fine = _radial_counts(n_coarse), _radial_counts(n_fine)
+    matrix = np.zeros((n_fine, n_coarse))
+    r0 = c0 = 0
+    for (a, b), kc, kf in zip(zip(_RADIAL_EDGES[:-1], _RADIAL_EDGES[1:]), coarse, fine):
+        xc, _ = gauss_legendre(kc, a, b)
+        xf, _ = gauss_legendre(kf, a, b)
+        matrix[r0:r0 + kf, c0:c0 + kc] = barycentric_matrix(xc, xf)
+        r0, c0 = r0 + kf, c0 + kc
+    return matrix
+
+
 class PolarPanels(NamedTuple):
     """Nodes of the polar panel rule, shaped ``(2 triangles, n_angles, n_radial)``.
 
@@ -85,11 +125,11 @@ def polar_panels(u, n_radial: int, n_angular: int, dtype=None) -> PolarPanels:
 
     Triangle 1 holds angles ``alpha in [0, pi/4]`` from the ``nu_x`` axis, where a ray ends at
     ``r_max = u / cos(alpha)``; triangle 2 is its mirror image in the diagonal. Along each ray
-    ``r = t R`` with ``R = min(r_max, 1)`` and ``t`` on Gauss nodes, and the part beyond the
-    cutoff ``[R, r_max]`` has its own Gauss nodes.
+    ``r = t R`` with ``R = min(r_max, 1)`` and ``t`` on a composite Gauss rule (panels
+    ``_RADIAL_EDGES``), and the part beyond the cutoff ``[R, r_max]`` has its own nodes.
     """
     dtype = dtype or jnp.result_type(float)
-    t, w_t = (jnp.asarray(a, dtype) for a in gauss_legendre(n_radial, 0.0, 1.0))
+    t, w_t = (jnp.asarray(a, dtype) for a in _radial_rule(n_radial))
     frac, w_frac = (jnp.asarray(a, dtype) for a in gauss_legendre(n_angular, 0.0, 1.0))
     u = jnp.asarray(u, dtype)
     alpha = (math.pi / 4) * frac  # (n_a,)
@@ -113,11 +153,9 @@ def polar_interpolation_matrices(coarse: tuple[int, int], fine: tuple[int, int])
     """Host matrices ``(L_radial, L_angular)`` taking polar-panel values from ``coarse``
     ``(n_radial, n_angular)`` Gauss nodes to ``fine`` ones (polynomial interpolation in ``t``
     and in the angle fraction, each on [0, 1])."""
-    t_c, _ = gauss_legendre(coarse[0], 0.0, 1.0)
-    t_f, _ = gauss_legendre(fine[0], 0.0, 1.0)
     a_c, _ = gauss_legendre(coarse[1], 0.0, 1.0)
     a_f, _ = gauss_legendre(fine[1], 0.0, 1.0)
-    return barycentric_matrix(t_c, t_f), barycentric_matrix(a_c, a_f)
+    return _radial_interpolation(coarse[0], fine[0]), barycentric_matrix(a_c, a_f)
 
 
 def frequency_quadrature(rule: str, u, p, dtype=None):

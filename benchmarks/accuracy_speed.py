@@ -1,0 +1,464 @@
+"""Accuracy and speed of every JMSE method on the tests' problem bank.
+
+Run from the repository root (normally through ``benchmarks/run_all.py``)::
+
+    .venv/bin/python benchmarks/accuracy_speed.py            # full (~15 min on 2 cores)
+    .venv/bin/python benchmarks/accuracy_speed.py --quick    # a small subset (< 2 min)
+
+Methods: the paper's square-grid baseline ``baseline_jmse`` at B = 32 ... 512; the presets
+``fast``, ``default`` and ``high``; each OTF engine at the default quadrature; each frequency
+quadrature at p = 4 ... 64 with the OTF computed directly at its nodes (overlap engine with
+the high preset's ``overlap_nodes``, so the quadrature's error dominates).
+
+For each method: the relative error against the bank's converged reference on every case;
+the warm time of the value, of ``jax.value_and_grad`` (gradient with respect to the Seidel
+coefficients) and of a batch of 625 designs (``vmap``; a 25 x 25 grid in ``w020`` and
+``w222`` around the paper's Fig. 1 point, chunked with ``lax.map(batch_size=...)`` when
+625 at once would not fit in memory); and the compile times. Writes
+``benchmarks/results/accuracy_speed{,_quick}.json``, ``.md`` and ``_pareto.png``, and prints
+the two headline ratios of issue 3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+import time
+import traceback
+
+import _common as common
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jmse_jax as jj
+
+#: Most scratch memory a batch may use at once; larger batches are chunked (lax.map).
+BATCH_MEMORY_BYTES = 2 * 1024**3
+BATCH_SIZE = 625
+
+
+# --------------------------------------------------------------------------------------
+# Methods
+# --------------------------------------------------------------------------------------
+
+
+class Method:
+    """A named way of computing the JMSE: ``fn(aberrations, field, u, signal, noise)``."""
+
+    def __init__(self, name, group, fn, parameter=None, settings=None, otf_nodes=None):
+        self.name = name
+        self.group = group  # "baseline", "preset", "engine", "quadrature:<rule>"
+        self.fn = fn
+        self.parameter = parameter  # B or p, for plotting
+        self.settings = settings or {}
+        self.otf_nodes = otf_nodes  # OTF evaluations per quadrant (None: FFT grid)
+
+
+def _jmse(**options):
+    def fn(aberrations, field, u, signal, noise):
+        return jj.jmse(aberrations, field, u, signal, noise, **options)
+
+    return fn
+
+
+def _baseline(B):
+    def fn(aberrations, field, u, signal, noise):
+        return jj.baseline_jmse(aberrations, field, u, signal, noise, B=B)
+
+    return fn
+
+
+def _polar_otf_nodes(nodes):
+    return 2 * nodes[0] * nodes[1]
+
+
+def methods(quick: bool) -> list[Method]:
+    out = []
+    for B in ((32, 64, 128) if quick else (32, 64, 128, 256, 512)):
+        out.append(Method(f"baseline B={B}", "baseline", _baseline(B), B, dict(B=B)))
+    for preset in (("fast", "default") if quick else ("fast", "default", "high")):
+        options = jj.jmse_options(preset)
+        out.append(Method(f"preset {preset}", "preset", _jmse(preset=preset), preset,
+                          dict(preset=preset, **options),
+                          _polar_otf_nodes(options["nodes"])
+                          if options["quadrature"] == "polar" else options["nodes"] ** 2))
+    default = jj.jmse_options("default")
+    engines = [] if quick else [("nudft", 64), ("nudft", 256), ("fft", 64), ("fft", 256)]
+    for engine, B in engines:
+        options = dict(preset="default", otf_method=engine, B=B)
+        out.append(Method(f"engine {engine} B={B}", "engine", _jmse(**options), B, options,
+                          _polar_otf_nodes(default["nodes"])))
+    overlap = jj.jmse_options("high")["overlap_nodes"]
+    rules = ("gauss",) if quick else jj.QUADRATURES
+    for rule in rules:
+        for p in ((4, 16) if quick else (4, 8, 16, 32, 64)):
+            if rule == "polar":
+                # (p, p/2) per triangle: p**2 OTF nodes per quadrant, like the tensor rules.
+                nodes = (p, max(p // 2, 1))
+                options = dict(quadrature="polar", nodes=nodes, se_nodes=nodes,
+                               overlap_nodes=overlap)
+                otf_nodes = _polar_otf_nodes(nodes)
+            else:
+                options = dict(quadrature=rule, nodes=p, overlap_nodes=overlap)
+                otf_nodes = p * p
+            out.append(Method(f"{rule} p={p}", f"quadrature:{rule}", _jmse(**options), p,
+                              options, otf_nodes))
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# Measurement
+# --------------------------------------------------------------------------------------
+
+
+def batch_designs(n: int):
+    """The first ``n`` designs of the 25 x 25 grid in (w020, w222) around the Fig. 1 point."""
+    w020, w222 = np.meshgrid(np.linspace(-6.0, 6.0, 25), np.linspace(-6.0, 6.0, 25),
+                             indexing="ij")
+    coefficients = {k: np.zeros(625) for k in ("w311", "w111")}
+    coefficients.update({k: np.full(625, v) for k, v in common.FIG1.items()})
+    coefficients["w020"] = w020.ravel()
+    coefficients["w222"] = w222.ravel()
+    return jj.Seidel(**{k: jnp.asarray(v[:n]) for k, v in coefficients.items()})
+
+
+def _batch_function(method, field, u, signal, noise, chunk):
+    def one(aberrations):
+        return method.fn(aberrations, field, u, signal, noise)
+
+    def batch(aberrations):
+        n = jax.tree_util.tree_leaves(aberrations)[0].shape[0]
+        if chunk >= n:
+            return jax.vmap(one)(aberrations)
+        return jax.lax.map(one, aberrations, batch_size=chunk)
+
+    return batch
+
+
+def measure(method: Method, cases, timing_case, settings) -> dict:
+    """Errors over the bank and the timings of one method (see the module docstring)."""
+    args = timing_case.arguments
+    row = dict(name=method.name, group=method.group, parameter=method.parameter,
+               settings=method.settings, otf_nodes=method.otf_nodes)
+
+    value = common.time_compiled(method.fn, args, budget_s=settings["budget_s"])
+    row.update(value_s=value["warm_s"], value_min_s=value["warm_min_s"],
+               value_repeats=value["repeats"], compile_s=value["compile_s"],
+               temp_bytes=value["temp_bytes"])
+
+    # Errors: the executable compiled above serves every case with the same pytree
+    # structure (Markov signal); other structures go through jax.jit.
+    jitted = jax.jit(method.fn)
+    errors = {}
+    for case in cases:
+        try:
+            result = value["compiled"](*case.arguments)
+        except (TypeError, ValueError):
+            result = jitted(*case.arguments)
+        errors[case.name] = dict(value=float(result),
+                                 relative_error=common.relative_error(result, case.reference))
+    row["errors"] = errors
+    scored = [errors[c.name]["relative_error"] for c in cases if c.converged]
+    row["worst_error"] = max(scored) if scored else None
+    row["median_error"] = statistics.median(scored) if scored else None
+    row["worst_case"] = (max((c for c in cases if c.converged),
+                             key=lambda c: errors[c.name]["relative_error"]).name
+                         if scored else None)
+
+    # value_and_grad with respect to the Seidel coefficients (the lens design variables).
+    vag = common.time_compiled(jax.value_and_grad(method.fn, argnums=0), args,
+                               budget_s=settings["budget_s"])
+    grad_leaves = jax.tree_util.tree_leaves(vag["value"][1])
+    row.update(value_and_grad_s=vag["warm_s"], value_and_grad_compile_s=vag["compile_s"],
+               value_and_grad_repeats=vag["repeats"],
+               value_and_grad_over_value=vag["warm_s"] / value["warm_s"],
+               gradient_finite=bool(all(np.all(np.isfinite(g)) for g in grad_leaves)))
+
+    # A batch of designs: vmap, chunked so that the scratch memory stays bounded; for slow
+    # methods a smaller batch is timed and the 625-design time extrapolated linearly.
+    n = BATCH_SIZE
+    while n > 5 and n * value["warm_s"] > settings["batch_budget_s"]:
+        n //= 5
+    n = min(n, settings["batch_max"])
+    per_design = value["temp_bytes"] or 0
+    chunk = n
+    while chunk > 1 and chunk * per_design > BATCH_MEMORY_BYTES:
+        chunk //= 5
+    chunk = max(chunk, 1)
+    _, field, u, signal, noise = args
+    expected = n * value["warm_s"]
+    batch = common.time_compiled(_batch_function(method, field, u, signal, noise, chunk),
+                                 (batch_designs(n),), budget_s=settings["budget_s"],
+                                 max_repeats=3, warmup=expected < 1.0)
+    batch_values = batch["value"]
+    row.update(batch_designs_timed=n, batch_chunk=chunk, batch_s=batch["warm_s"],
+               batch_625_s=batch["warm_s"] * BATCH_SIZE / n,
+               batch_625_extrapolated=n < BATCH_SIZE, batch_compile_s=batch["compile_s"],
+               batch_per_design_over_value=batch["warm_s"] / n / value["warm_s"],
+               batch_all_finite=bool(np.all(np.isfinite(batch_values))))
+    return row
+
+
+# --------------------------------------------------------------------------------------
+# Headline ratios, table, plot
+# --------------------------------------------------------------------------------------
+
+
+def headlines(rows) -> dict:
+    by_name = {r["name"]: r for r in rows if "error" not in r}
+    default = by_name.get("preset default")
+    baselines = sorted((r for r in by_name.values() if r["group"] == "baseline"),
+                       key=lambda r: r["parameter"])
+    if default is None or not baselines:
+        return dict(note="default preset or baselines missing")
+    out = dict(default_worst_error=default["worst_error"], default_value_s=default["value_s"],
+               default_value_and_grad_over_value=default["value_and_grad_over_value"],
+               value_and_grad_target_met=default["value_and_grad_over_value"] <= 2.5,
+               default_batch_625_s=default["batch_625_s"])
+    reaching = [r for r in baselines if r["worst_error"] <= default["worst_error"]]
+    if reaching:
+        cheapest = min(reaching, key=lambda r: r["value_s"])
+        out["equal_accuracy"] = dict(
+            baseline=cheapest["name"], baseline_worst_error=cheapest["worst_error"],
+            baseline_value_s=cheapest["value_s"],
+            speedup=cheapest["value_s"] / default["value_s"], reached=True, target=100.0)
+    else:
+        largest = baselines[-1]
+        out["equal_accuracy"] = dict(
+            reached=False,
+            note=(f"no tested baseline B reaches the default's worst-case error "
+                  f"{default['worst_error']:.2e}; ratio given at the largest B"),
+            baseline=largest["name"], baseline_worst_error=largest["worst_error"],
+            baseline_value_s=largest["value_s"],
+            speedup=largest["value_s"] / default["value_s"],
+            error_ratio_at_that_B=largest["worst_error"] / default["worst_error"],
+            target=100.0)
+    out["equal_accuracy"]["target_met"] = out["equal_accuracy"]["speedup"] >= 100.0
+    b64 = by_name.get("baseline B=64")
+    if b64 is not None:
+        gain = dict(baseline_worst_error=b64["worst_error"], baseline_value_s=b64["value_s"],
+                    default_value_s=default["value_s"],
+                    default_within_baseline_time=default["value_s"] <= b64["value_s"],
+                    gain_default=b64["worst_error"] / default["worst_error"], target=1000.0)
+        # Best of our methods at no more time than the B = 64 baseline.
+        ours = [r for r in by_name.values() if r["group"] != "baseline"
+                and r["value_s"] <= b64["value_s"] and r["worst_error"] is not None]
+        if ours:
+            best = min(ours, key=lambda r: r["worst_error"])
+            gain.update(best_within_time=best["name"], best_within_time_error=best["worst_error"],
+                        best_within_time_s=best["value_s"],
+                        gain_best_within_time=b64["worst_error"] / best["worst_error"])
+        else:
+            gain["best_within_time"] = None
+        headline_gain = (gain["gain_default"] if gain["default_within_baseline_time"]
+                         else gain.get("gain_best_within_time"))
+        gain["gain"] = headline_gain
+        gain["target_met"] = headline_gain is not None and headline_gain >= 1000.0
+        out["equal_time"] = gain
+    return out
+
+
+def _e(x):
+    return "–" if x is None else f"{x:.1e}"
+
+
+def markdown(report) -> str:
+    m = report["machine"]
+    lines = [
+        "# JMSE accuracy and speed" + (" (quick subset)" if report["quick"] else ""),
+        "",
+        f"{m['cpu_model']}, {m['cpu_count']} CPUs, jax {m['jax_version']}, {m['dtype']}, "
+        f"commit `{(m['commit'] or '?')[:10]}`{' (dirty tree)' if m['dirty'] else ''}, "
+        f"{m['date']}. Load average at start {m['load_at_start']['load_1min']:.2f}, at end "
+        f"{report['load_at_end']['load_1min']:.2f} (timings on a loaded machine are inflated).",
+        "",
+        f"Bank: {len(report['cases'])} cases, {report['converged_cases']} with a converged "
+        f"reference (worst/median error over those); reference convergence up to "
+        f"{_e(report['reference_convergence_max'])}. Times are warm medians of one evaluation "
+        f"on the Fig. 1 case; batch = {BATCH_SIZE} designs (vmap; `*` extrapolated from the "
+        "timed sub-batch); value_and_grad is with respect to the Seidel coefficients.",
+        "",
+    ]
+    h = report["headlines"]
+    if "equal_accuracy" in h:
+        ea, et = h["equal_accuracy"], h.get("equal_time", {})
+        lines += ["## Headline ratios", ""]
+        if ea["reached"]:
+            lines.append(f"1. Equal-accuracy speed-up: {ea['baseline']} (worst "
+                         f"{_e(ea['baseline_worst_error'])}) takes "
+                         f"{common.fmt_seconds(ea['baseline_value_s'])}; the default "
+                         f"(worst {_e(h['default_worst_error'])}) "
+                         f"{common.fmt_seconds(h['default_value_s'])}: **{ea['speedup']:.3g}×** "
+                         f"(target ≥ 100×).")
+        else:
+            lines.append(f"1. Equal-accuracy speed-up: {ea['note']}: {ea['baseline']} "
+                         f"(worst {_e(ea['baseline_worst_error'])}, "
+                         f"{ea['error_ratio_at_that_B']:.3g}× the default's error) takes "
+                         f"{common.fmt_seconds(ea['baseline_value_s'])} vs the default's "
+                         f"{common.fmt_seconds(h['default_value_s'])}: **{ea['speedup']:.3g}×** "
+                         f"(target ≥ 100×).")
+        if et:
+            text = (f"2. Equal-time accuracy gain: baseline B=64 worst "
+                    f"{_e(et['baseline_worst_error'])} in "
+                    f"{common.fmt_seconds(et['baseline_value_s'])}; default worst "
+                    f"{_e(h['default_worst_error'])} → **{et['gain_default']:.3g}×**")
+            if not et["default_within_baseline_time"]:
+                slower = et["default_value_s"] / et["baseline_value_s"]
+                text += f", but the default takes {slower:.3g}× the baseline's time; "
+                if et.get("best_within_time"):
+                    text += (f"the most accurate of our methods at no more time is "
+                             f"{et['best_within_time']} (worst {_e(et['best_within_time_error'])},"
+                             f" {common.fmt_seconds(et['best_within_time_s'])}): "
+                             f"**{et['gain_best_within_time']:.3g}×**")
+                else:
+                    text += "none of our tested methods is as fast"
+            lines.append(text + " (target ≥ 1000×).")
+        lines.append(f"3. value_and_grad / value for the default: "
+                     f"**{h['default_value_and_grad_over_value']:.2f}** (target ≤ 2.5).")
+        lines.append("")
+    lines += ["## All methods", "",
+              "| method | OTF nodes/quadrant | worst rel. error | median | worst case | value | "
+              "value_and_grad (×) | batch of 625 (per design) | compile value / vag / batch |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for r in report["methods"]:
+        if "error" in r:
+            lines.append(f"| {r['name']} | failed: {r['error'].splitlines()[-1]} |||||||| ")
+            continue
+        star = "*" if r["batch_625_extrapolated"] else ""
+        lines.append(
+            f"| {r['name']} | {r['otf_nodes'] or '–'} | {_e(r['worst_error'])} | "
+            f"{_e(r['median_error'])} | {r['worst_case']} | {common.fmt_seconds(r['value_s'])} | "
+            f"{common.fmt_seconds(r['value_and_grad_s'])} ({r['value_and_grad_over_value']:.2f}) | "
+            f"{common.fmt_seconds(r['batch_625_s'])}{star} "
+            f"({common.fmt_seconds(r['batch_625_s'] / BATCH_SIZE)}) | "
+            f"{common.fmt_seconds(r['compile_s'])} / "
+            f"{common.fmt_seconds(r['value_and_grad_compile_s'])} / "
+            f"{common.fmt_seconds(r['batch_compile_s'])} |")
+    lines += ["", "## Bank", "", "| case | reference | convergence | source |", "|---|---|---|---|"]
+    for c in report["cases"]:
+        lines.append(f"| {c['name']} | {c['reference']:.10e} | {_e(c['reference_convergence'])}"
+                     f"{'' if c['converged'] else ' (excluded)'} | {c['reference_source']} |")
+    return "\n".join(lines) + "\n"
+
+
+def pareto_plot(rows, path, floor=1e-16):
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8.5, 6))
+    groups = {}
+    for r in rows:
+        if "error" in r or r["worst_error"] is None:
+            continue
+        groups.setdefault(r["group"], []).append(r)
+    styles = {"baseline": dict(color="k", marker="s"), "preset": dict(color="C3", marker="*",
+                                                                       markersize=14),
+              "engine": dict(color="C4", marker="D")}
+    colors = iter(["C0", "C1", "C2", "C5", "C6", "C8"])
+    points = []
+    for group, members in groups.items():
+        style = dict(styles.get(group) or dict(color=next(colors), marker="o"))
+        # Lines join a family in order of its size parameter (B or p), not of the noisy time.
+        members = sorted(members, key=lambda r: (r["parameter"] if group != "preset" else 0,
+                                                 r["value_s"]))
+        x = [r["value_s"] for r in members]
+        y = [max(r["worst_error"], floor) for r in members]
+        points += list(zip(x, y, [r["name"] for r in members], strict=True))
+        linestyle = "-" if group == "baseline" or group.startswith("quadrature") else "none"
+        ax.plot(x, y, linestyle=linestyle, label=group.replace("quadrature:", "quadrature "),
+                **style)
+        if group in ("baseline", "preset", "engine"):
+            for r, xi, yi in zip(members, x, y, strict=True):
+                ax.annotate(r["name"].split(" ", 1)[1], (xi, yi), textcoords="offset points",
+                            xytext=(4, 4), fontsize=7)
+    # Pareto front: no other method is both faster and more accurate.
+    points.sort()
+    front, best = [], math.inf
+    for x, y, _ in points:
+        if y < best:
+            front.append((x, y))
+            best = y
+    if front:
+        fx, fy = zip(*front, strict=True)
+        ax.step(fx, fy, where="post", color="0.6", linewidth=4, alpha=0.4, zorder=0,
+                label="Pareto front")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("warm time of one JMSE value [s] (jit, float64)")
+    ax.set_ylabel("worst-case relative error over the bank")
+    ax.set_title("JMSE: error versus time")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------------------
+
+
+def run(quick: bool = False, only: list[str] | None = None) -> dict:
+    start = time.perf_counter()
+    machine = common.machine_info()
+    settings = (dict(budget_s=0.5, batch_budget_s=2.0, batch_max=25, bank_limit=5)
+                if quick else dict(budget_s=2.0, batch_budget_s=5.0, batch_max=BATCH_SIZE,
+                                   bank_limit=None))
+    print("loading the problem bank ...", flush=True)
+    cases = common.load_bank(limit=settings["bank_limit"],
+                             reference_fallback="high" if quick else "strict")
+    timing_case = next((c for c in cases if c.name == "fig1"), cases[0])
+    rows = []
+    for method in methods(quick):
+        if only and not any(word in method.name for word in only):
+            continue
+        t0 = time.perf_counter()
+        try:
+            row = measure(method, cases, timing_case, settings)
+        except Exception:  # a method broken by a concurrent change must not stop the run
+            row = dict(name=method.name, group=method.group, error=traceback.format_exc())
+            print(f"{method.name:24s} FAILED\n{row['error']}", flush=True)
+            rows.append(row)
+            continue
+        rows.append(row)
+        print(f"{method.name:24s} worst {_e(row['worst_error'])} ({row['worst_case']})  "
+              f"value {common.fmt_seconds(row['value_s'])}  vag "
+              f"{row['value_and_grad_over_value']:.2f}x  batch625 "
+              f"{common.fmt_seconds(row['batch_625_s'])}"
+              f"{'*' if row['batch_625_extrapolated'] else ''}"
+              f"  compile {common.fmt_seconds(row['compile_s'])}  "
+              f"[{time.perf_counter() - t0:.0f} s]", flush=True)
+    converged = [c for c in cases if c.converged]
+    report = dict(
+        description="Accuracy and speed of every JMSE method on the tests' problem bank",
+        quick=quick, machine=machine, settings=settings, batch_size=BATCH_SIZE,
+        batch_designs="25 x 25 grid, w020 and w222 in [-6, 6], other Seidel terms at Fig. 1",
+        timing_case=timing_case.name,
+        cases=[c.describe() for c in cases], converged_cases=len(converged),
+        reference_convergence_max=max((c.convergence for c in converged), default=None),
+        methods=rows, headlines=headlines(rows),
+        load_at_end=common.load_average(), seconds=time.perf_counter() - start,
+    )
+    suffix = "_quick" if quick else ""
+    stem = common.RESULTS / f"accuracy_speed{suffix}"
+    common.write_json(stem.with_suffix(".json"), report)
+    stem.with_suffix(".md").write_text(markdown(report))
+    pareto_plot(rows, common.RESULTS / f"accuracy_speed{suffix}_pareto.png")
+    print(markdown(report).split("## All methods")[0])
+    print(f"accuracy_speed: {report['seconds']:.0f} s, wrote {stem}.json/.md/_pareto.png")
+    return report
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="a small subset (< 2 min)")
+    parser.add_argument("--only", nargs="*", help="run only methods whose name contains one "
+                        "of these words (development)")
+    args = parser.parse_args(argv)
+    run(quick=args.quick, only=args.only)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

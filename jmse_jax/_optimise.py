@@ -1,0 +1,592 @@
+"""JMSE-driven lens optimisation (optimistix; jaxopt's L-BFGS-B when box bounds are given).
+
+The objective is the JMSE of the lens (SPEC §2, Eq. 7 of Berkner & Shroff) averaged over
+field points and, optionally, wavelengths; the alternative ``merit="rms"`` is the classical
+optical merit (mean-square wavefront error over the same fields), so the two designs can be
+compared from the same start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import time
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from ._merit import jmse
+from ._numerics import check_choice, check_count, check_range, is_concrete
+from ._spectra import AbstractNoise, AbstractSignal, MarkovSignal, WhiteNoise
+from .lens import (
+    Lens,
+    paraxial_trace,
+    rms_wavefront_error,
+    solve_last_curvature,
+    validate_lens,
+)
+from .lens._paraxial import _raise_for, _status
+from .lens._seidel import _waves_from_traces
+
+__all__ = ["MERITS", "SOLVERS", "OptimisationResult", "lens_merit", "optimise"]
+
+#: Names accepted by ``lens_merit`` / ``optimise`` for ``merit``.
+MERITS = ("jmse", "rms")
+#: Named optimistix minimisers (``"lbfgsb"`` is jaxopt's, used whenever bounds are given).
+SOLVERS = ("bfgs", "nonlinear_cg", "lbfgs", "lbfgsb")
+
+#: Default variable scales (the size of a unit step of the normalised optimisation variable).
+#: A 0.1 mm image shift is about one wave of defocus at F/4.6 in the visible.
+_DEFAULT_SCALES = {
+    "curvatures": 0.01,
+    "thicknesses": 1.0,
+    "stop_position": 1.0,
+    "image_shift": 0.1,
+    "conics": 1.0,
+    "aspheric4": 1e-5,
+    "ep_radius": 0.1,
+    "field_angle": 1.0,
+}
+
+
+class _RescaledSignal(AbstractSignal):
+    """``S_x`` seen in the frequency units of another wavelength: ``S(nu / s) / s²``."""
+
+    base: AbstractSignal
+    scale: jax.Array
+
+    def radial(self, r):
+        return self.base.radial(r / self.scale) / (self.scale * self.scale)
+
+
+class _RescaledNoise(AbstractNoise):
+    """``S_n`` seen in the frequency units of another wavelength: ``S(nu / s) / s²``."""
+
+    base: AbstractNoise
+    scale: jax.Array
+
+    def __call__(self, nu_x, nu_y):
+        return self.base(nu_x / self.scale, nu_y / self.scale) / (self.scale * self.scale)
+
+
+def _f_number_of(trace):
+    slope = trace.u[-1]
+    slope = jnp.where(slope == 0, -jnp.ones_like(slope), slope)
+    return -1.0 / (2.0 * trace.n[-1] * slope)
+
+
+def lens_merit(
+    lens: Lens,
+    *,
+    merit: str = "jmse",
+    u=0.2,
+    signal: AbstractSignal | None = None,
+    noise: AbstractNoise | None = None,
+    fields=(0.0, 0.7, 1.0),
+    field_weights=None,
+    wavelengths=None,
+    reference_scale=None,
+    jmse_options: dict | None = None,
+):
+    """Field- (and wavelength-) averaged JMSE, or mean-square wavefront error, of ``lens``.
+
+    .. math::
+
+        M = \\frac{1}{N_\\lambda} \\sum_\\lambda \\frac{\\sum_f w_f\\,
+            \\mathrm{JMSE}(\\mathrm{Seidel}(\\lambda), h_f, u_\\lambda)}{\\sum_f w_f}
+
+    Parameters
+    ----------
+    lens : Lens
+    merit : {"jmse", "rms"}
+        ``"rms"`` averages the wavefront variance [waves²] instead (piston and tilt removed).
+    u : float [Nyquist / cutoff] at the reference wavelength and ``reference_scale``
+    signal, noise : spectra in the frequency units of ``reference_scale`` (defaults
+        ``MarkovSignal(1, 5)``, ``WhiteNoise(1e-3)``, the paper's Fig. 1 setting)
+    fields : sequence of float in [0, 1] [fraction of full field]
+    field_weights : sequence of float >= 0, optional (equal by default)
+    wavelengths : sequence of float [µm], optional (default: ``lens.wavelength`` only)
+    reference_scale : float [µm], optional
+        ``lambda N`` that the frequency unit of ``u``, ``signal`` and ``noise`` refers to
+        (default: this lens at its reference wavelength). At wavelength ``lambda`` with
+        working F-number ``N`` the pixel pitch and the scene are fixed in physical units, so
+        ``u`` becomes ``u s`` and the spectra ``S(nu / s) / s²`` with
+        ``s = lambda N / reference_scale``.
+    jmse_options : dict, optional, keyword options of ``jmse`` (e.g. ``{"preset": "fast"}``)
+
+    Returns
+    -------
+    scalar. ``+inf`` (with a zero gradient, never NaN) when the lens is non-physical under
+    tracing (``lens_status(lens).ok`` false); a concrete non-physical lens raises
+    ``ValueError``.
+    """
+    check_choice("merit", merit, MERITS)
+    dtype = lens.ep_radius.dtype
+    fields = jnp.asarray(fields, dtype)
+    if fields.ndim != 1:
+        raise ValueError(f"fields must be a 1-D sequence, got shape {tuple(fields.shape)}")
+    check_range("fields", fields, 0.0, 1.0)
+    weights = jnp.ones_like(fields) if field_weights is None else jnp.asarray(field_weights,
+                                                                             dtype)
+    if weights.shape != fields.shape:
+        raise ValueError(
+            f"field_weights must have one weight per field ({fields.shape[0]}), "
+            f"got shape {tuple(weights.shape)}"
+        )
+    check_range("field_weights", weights, 0.0, None)
+    check_range("u", u, 0.0, 1.5, low_inclusive=False)
+    if wavelengths is not None:
+        for wl in wavelengths:
+            check_range("wavelengths", wl, 0.2, 20.0)
+        wavelengths = jnp.asarray(wavelengths, dtype)
+    if is_concrete(lens):
+        _raise_for(_status_jit(lens))
+    if reference_scale is not None:
+        reference_scale = jnp.asarray(reference_scale, dtype)
+    return _lens_merit_jit(
+        lens, merit, jnp.asarray(u, dtype), signal, noise, fields, weights, wavelengths,
+        reference_scale, _freeze(jmse_options),
+    )
+
+
+def _freeze(options) -> tuple:
+    """``jmse`` keyword options as a hashable (static) tuple of pairs."""
+    items = []
+    for key, value in sorted((options or {}).items()):
+        items.append((key, tuple(value) if isinstance(value, list) else value))
+    return tuple(items)
+
+
+@eqx.filter_jit
+def _status_jit(lens):
+    return _status(lens, paraxial_trace(lens))
+
+
+@eqx.filter_jit
+def _lens_merit_jit(lens, merit, u, signal, noise, fields, weights, wavelengths,
+                    reference_scale, jmse_items):
+    wavelengths = None if wavelengths is None else list(wavelengths)
+    table, ok = _merit_table(lens, merit, u, signal, noise, fields, wavelengths,
+                             reference_scale, dict(jmse_items))
+    value = jnp.mean(jnp.sum(weights * table, axis=1)) / jnp.sum(weights)
+    return jnp.where(ok, value, jnp.inf)
+
+
+def _merit_table(lens, merit, u, signal, noise, fields, wavelengths, reference_scale,
+                 jmse_options):
+    """Per-(wavelength, field) merit, shape ``(n_wavelengths, n_fields)``, and validity.
+
+    A non-physical lens is evaluated with zero aberrations (finite values and gradients)
+    and flagged by ``ok``; callers check concrete lenses beforehand.
+    """
+    signal = MarkovSignal(1.0, 5.0) if signal is None else signal
+    noise = WhiteNoise(1e-3) if noise is None else noise
+    dtype = lens.ep_radius.dtype
+    monochromatic = wavelengths is None
+    wavelengths = [lens.wavelength] if monochromatic else list(wavelengths)
+    reference = paraxial_trace(lens)
+    ok = _status(lens, reference).ok
+    own_reference = reference_scale is None
+    if own_reference:
+        reference_scale = lens.wavelength * _f_number_of(reference)
+    u = jnp.asarray(u, dtype)
+
+    rows = []
+    for wl in wavelengths:
+        trace = reference if monochromatic else paraxial_trace(lens, wl)
+        aberrations = _waves_from_traces(lens, trace, reference, wl)
+        aberrations = jax.tree_util.tree_map(
+            lambda a: jnp.where(ok, a, jnp.zeros_like(a)), aberrations
+        )
+        if merit == "rms":
+            rows.append(jax.vmap(lambda h, ab=aberrations: rms_wavefront_error(ab, h) ** 2)(
+                fields))
+            continue
+        if monochromatic and own_reference:
+            scale = jnp.ones((), dtype)
+        else:
+            scale = wl * _f_number_of(trace) / reference_scale
+            scale = jnp.where(ok & (scale > 0), scale, jnp.ones_like(scale))
+        band = u * scale
+        spectra = (_RescaledSignal(signal, scale), _RescaledNoise(noise, scale))
+
+        def one_field(h, ab=aberrations, band=band, spectra=spectra):
+            return jmse(ab, h, band, *spectra, **jmse_options)
+
+        rows.append(jax.vmap(one_field)(fields))
+    return jnp.stack(rows), ok
+
+
+@eqx.filter_jit
+def _report(lens, u, signal, noise, fields, wavelengths, reference_scale, jmse_items):
+    """Per-field JMSE and wavefront variance (wavelength-averaged) of a design, jitted."""
+    wavelengths = None if wavelengths is None else list(wavelengths)
+    options = dict(jmse_items)
+    jmse_table, ok = _merit_table(lens, "jmse", u, signal, noise, fields, wavelengths,
+                                  reference_scale, options)
+    rms_table, _ = _merit_table(lens, "rms", u, signal, noise, fields, wavelengths,
+                                reference_scale, options)
+    return jnp.mean(jmse_table, axis=0), jnp.mean(rms_table, axis=0), ok
+
+
+# --------------------------------------------------------------------------------------
+# Optimisation variables: "name", "name[i]" or dotted paths such as "media[0].nd"
+# --------------------------------------------------------------------------------------
+
+_TOKEN = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
+
+
+def _parse(path: str, lens: Lens):
+    """Tokens of ``path`` and the trailing array index; ValueError when it names no float."""
+    node = lens
+    tokens = []
+    trailing = None
+    parts = path.split(".")
+    for position, part in enumerate(parts):
+        match = _TOKEN.match(part)
+        if match is None or not hasattr(node, match.group(1)):
+            names = ", ".join(f.name for f in dataclasses.fields(Lens))
+            raise ValueError(
+                f"variable {path!r} does not name a lens parameter; use a field of Lens "
+                f"({names}), optionally indexed, e.g. 'curvatures[1]' or 'media[0].nd'"
+            )
+        name, index = match.group(1), match.group(2)
+        node = getattr(node, name)
+        tokens.append((name, None))
+        if index is not None:
+            index = int(index)
+            if isinstance(node, tuple):
+                if index >= len(node):
+                    raise ValueError(f"variable {path!r}: index {index} out of range "
+                                     f"[0, {len(node) - 1}]")
+                node = node[index]
+                tokens[-1] = (name, index)
+            else:
+                size = int(np.size(node))
+                if position != len(parts) - 1 or index >= size:
+                    raise ValueError(f"variable {path!r}: index {index} out of range "
+                                     f"[0, {size - 1}]")
+                trailing = index
+                node = node[index]
+    if not (hasattr(node, "dtype") and jnp.issubdtype(node.dtype, jnp.floating)
+            and np.ndim(node) == 0):
+        raise ValueError(f"variable {path!r} must name a scalar float parameter of the lens")
+    return tuple(tokens), trailing
+
+
+def _node_getter(tokens):
+    def where(lens):
+        node = lens
+        for name, index in tokens:
+            node = getattr(node, name)
+            if index is not None:
+                node = node[index]
+        return node
+
+    return where
+
+
+def _get(lens, parsed):
+    tokens, trailing = parsed
+    node = _node_getter(tokens)(lens)
+    return node if trailing is None else node[trailing]
+
+
+def _set(lens, parsed, value):
+    tokens, trailing = parsed
+    where = _node_getter(tokens)
+    if trailing is None:
+        return eqx.tree_at(where, lens, jnp.asarray(value, where(lens).dtype))
+    return eqx.tree_at(where, lens, where(lens).at[trailing].set(value))
+
+
+def _default_scale(path: str) -> float:
+    head = path.split(".")[-1].split("[")[0]
+    if path.startswith("media"):
+        return {"nd": 0.01, "vd": 1.0, "n": 0.01, "a": 0.01, "b": 1e-3, "c": 1e-4}.get(head, 0.01)
+    return _DEFAULT_SCALES.get(head, 1.0)
+
+
+class _Problem(eqx.Module):
+    """The objective ``log M(lens(p0 + scales * y))`` of normalised variables ``y``."""
+
+    parsed: tuple = eqx.field(static=True)
+    merit: str = eqx.field(static=True)
+    jmse_items: tuple = eqx.field(static=True)
+    scales: jax.Array
+    fields: jax.Array
+    field_weights: jax.Array
+    wavelengths: jax.Array | None
+    f_number: jax.Array | None
+    u: jax.Array
+    signal: AbstractSignal
+    noise: AbstractNoise
+    reference_scale: jax.Array
+
+    def design(self, y, lens):
+        for i, parsed in enumerate(self.parsed):
+            lens = _set(lens, parsed, _get(lens, parsed) + self.scales[i] * y[i])
+        if self.f_number is not None:
+            lens = solve_last_curvature(lens, self.f_number)
+        return lens
+
+    def merit_value(self, lens):
+        return lens_merit(
+            lens, merit=self.merit, u=self.u, signal=self.signal, noise=self.noise,
+            fields=self.fields, field_weights=self.field_weights,
+            wavelengths=None if self.wavelengths is None else list(self.wavelengths),
+            reference_scale=self.reference_scale, jmse_options=dict(self.jmse_items),
+        )
+
+    def __call__(self, y, lens):
+        return jnp.log(self.merit_value(self.design(y, lens)))
+
+
+@eqx.filter_jit
+def _solve_optimistix(problem, lens, solver, max_steps):
+    y0 = jnp.zeros(len(problem.parsed), problem.scales.dtype)
+    return optx.minimise(problem, solver, y0, args=lens, max_steps=max_steps, throw=False)
+
+
+@eqx.filter_jit
+def _solve_lbfgsb(problem, lens, lower, upper, max_steps, tol):
+    import jaxopt
+
+    solver = jaxopt.LBFGSB(fun=problem, maxiter=max_steps, tol=tol)
+    y0 = jnp.clip(jnp.zeros_like(lower), lower, upper)
+    return solver.run(y0, (lower, upper), lens)
+
+
+@dataclasses.dataclass(frozen=True)
+class OptimisationResult:
+    """Outcome of ``optimise``.
+
+    Attributes
+    ----------
+    solution : optimistix.Solution (or jaxopt's OptStep for L-BFGS-B), in normalised
+        variables ``y`` (parameter ``= start + scale * y``)
+    lens : Lens, the optimised design (solves applied)
+    start : Lens, the starting design
+    parameters : dict name -> float, the optimised variables [lens units]
+    merit : str; value : float, the optimised objective (mean JMSE, or mean wavefront
+        variance [waves²])
+    jmse : float, field-averaged JMSE of ``lens``; jmse_per_field : tuple of float
+    rms_wavefront : float [waves], RMS over the fields of the RMS wavefront error
+    start_jmse, start_rms_wavefront : float, the same for the starting design
+    iterations : int; wall_time : float [s] (compilation included on the first call)
+    result : str, the solver's termination message
+    """
+
+    solution: object
+    lens: Lens
+    start: Lens
+    parameters: dict
+    merit: str
+    value: float
+    jmse: float
+    jmse_per_field: tuple
+    rms_wavefront: float
+    start_jmse: float
+    start_rms_wavefront: float
+    iterations: int
+    wall_time: float
+    result: str
+    solver: str
+    fields: tuple
+
+    def summary(self) -> str:
+        """A readable multi-line report of the optimised design."""
+        lines = [f"optimise: merit={self.merit}, solver={self.solver}, {self.result}"]
+        for name, value in self.parameters.items():
+            lines.append(f"  {name:<18s} = {value: .8g}")
+        for name in ("curvatures", "thicknesses"):
+            values = np.array2string(np.asarray(getattr(self.lens, name)), precision=6)
+            lines.append(f"  {name:<18s} = {values}")
+        per_field = ", ".join(f"h={h:g}: {v:.6e}" for h, v in zip(self.fields,
+                                                                   self.jmse_per_field,
+                                                                   strict=True))
+        lines.append(f"  JMSE (mean)        = {self.jmse:.8e}   [{per_field}]"
+                     f"   (start {self.start_jmse:.6e})")
+        lines.append(f"  RMS wavefront      = {self.rms_wavefront:.6f} waves (RMS over fields;"
+                     f" start {self.start_rms_wavefront:.6f})")
+        lines.append(f"  iterations         = {self.iterations}")
+        lines.append(f"  wall time          = {self.wall_time:.3f} s")
+        return "\n".join(lines)
+
+
+def _make_solver(solver, rtol, atol):
+    if isinstance(solver, optx.AbstractMinimiser):
+        return solver
+    check_choice("solver", solver, SOLVERS[:-1])
+    if solver == "bfgs":
+        return optx.BFGS(rtol=rtol, atol=atol)
+    if solver == "lbfgs":
+        return optx.LBFGS(rtol=rtol, atol=atol)
+    return optx.NonlinearCG(rtol=rtol, atol=atol)
+
+
+def optimise(
+    lens: Lens,
+    variables: Sequence[str] = ("curvatures[0]", "image_shift"),
+    *,
+    merit: str = "jmse",
+    u=0.2,
+    signal: AbstractSignal | None = None,
+    noise: AbstractNoise | None = None,
+    fields=(0.0, 0.7, 1.0),
+    field_weights=None,
+    wavelengths=None,
+    f_number=None,
+    bounds: dict | None = None,
+    solver="bfgs",
+    scales: dict | None = None,
+    rtol: float = 1e-7,
+    atol: float = 1e-7,
+    max_steps: int = 200,
+    jmse_options: dict | None = None,
+) -> OptimisationResult:
+    """Optimise lens parameters (and focus) for the field-averaged JMSE (or RMS wavefront).
+
+    Minimises ``log M`` (same minimiser as ``M``, better scaled) of ``lens_merit`` over the
+    named ``variables``, each normalised as ``start + scale * y``.
+
+    Parameters
+    ----------
+    lens : Lens, the starting design
+    variables : sequence of str
+        Scalar float parameters of ``Lens``: ``"curvatures[0]"``, ``"thicknesses[0]"``,
+        ``"stop_position"``, ``"image_shift"`` (focus), ``"conics[1]"``,
+        ``"media[0].nd"`` ...
+    merit : {"jmse", "rms"}
+    u, signal, noise, fields, field_weights, wavelengths, jmse_options
+        As in ``lens_merit``. ``u`` and the spectra refer to the *starting* design's
+        ``lambda N``: the pixel pitch and the scene stay fixed while the design changes.
+    f_number : float, optional
+        Solve the last curvature at every step so the working F-number stays at this value
+        (Zemax's F-number solve; the paper's "F/4.6 singlet"). Do not also vary that
+        curvature.
+    bounds : dict name -> (low, high), optional
+        Box bounds in lens units for some variables (``None`` for an open side); when given,
+        jaxopt's ``LBFGSB`` replaces the optimistix solver.
+    solver : {"bfgs", "nonlinear_cg", "lbfgs"} or an ``optimistix.AbstractMinimiser``
+    scales : dict name -> float, optional, variable scales [lens units per unit step]
+    rtol, atol : float, optimistix termination tolerances (on ``y`` and ``log M``)
+    max_steps : int >= 1
+
+    Returns
+    -------
+    OptimisationResult (``.summary()`` gives the readable report)
+
+    Examples
+    --------
+    >>> import jax
+    >>> jax.config.update("jax_enable_x64", True)
+    >>> from jmse_jax.lens import Singlet, N_BK7
+    >>> from jmse_jax import optimise
+    >>> start = Singlet(0.05, -0.15, 1.5, N_BK7, stop_distance=1.0, f_number=4.6,
+    ...                 field_angle=10.0)
+    >>> result = optimise(start, ("curvatures[0]", "image_shift"), f_number=4.6,
+    ...                   jmse_options={"preset": "fast"})  # doctest: +SKIP
+    >>> print(result.summary())  # doctest: +SKIP
+    """
+    if not isinstance(lens, Lens):
+        raise TypeError(f"lens must be a jmse_jax.lens.Lens, got {type(lens)}")
+    check_choice("merit", merit, MERITS)
+    check_count("max_steps", max_steps)
+    variables = tuple(variables)
+    if not variables:
+        raise ValueError("variables must name at least one lens parameter")
+    if len(set(variables)) != len(variables):
+        raise ValueError(f"variables must be distinct, got {variables!r}")
+    parsed = tuple(_parse(v, lens) for v in variables)
+    if f_number is not None:
+        check_range("f_number", f_number, 0.0, None, low_inclusive=False)
+        last = f"curvatures[{lens.n_surfaces - 1}]"
+        if last in variables:
+            raise ValueError(f"{last} is fixed by the f_number solve; remove it from variables")
+        lens = solve_last_curvature(lens, f_number)
+    scales = dict(scales or {})
+    for name in scales:
+        if name not in variables:
+            raise ValueError(f"scales names {name!r}, which is not among variables {variables}")
+        check_range(f"scales[{name!r}]", scales[name], 0.0, None, low_inclusive=False)
+    dtype = lens.ep_radius.dtype
+    scale_vector = jnp.asarray([scales.get(v, _default_scale(v)) for v in variables], dtype)
+    signal = MarkovSignal(1.0, 5.0) if signal is None else signal
+    noise = WhiteNoise(1e-3) if noise is None else noise
+    jmse_items = _freeze(jmse_options)
+    validate_lens(lens)
+    reference_scale = lens.wavelength * _f_number_of(paraxial_trace(lens))
+    problem = _Problem(
+        parsed=parsed, merit=merit, jmse_items=jmse_items, scales=scale_vector,
+        fields=jnp.asarray(fields, dtype),
+        field_weights=(jnp.ones(len(fields), dtype) if field_weights is None
+                       else jnp.asarray(field_weights, dtype)),
+        wavelengths=None if wavelengths is None else jnp.asarray(wavelengths, dtype),
+        f_number=None if f_number is None else jnp.asarray(f_number, dtype),
+        u=jnp.asarray(u, dtype), signal=signal, noise=noise,
+        reference_scale=jnp.asarray(reference_scale, dtype),
+    )
+
+    start_time = time.perf_counter()
+    if bounds:
+        for name in bounds:
+            if name not in variables:
+                raise ValueError(f"bounds names {name!r}, which is not among variables "
+                                 f"{variables}")
+        lower, upper = [], []
+        for i, (name, p) in enumerate(zip(variables, parsed, strict=True)):
+            low, high = bounds.get(name, (None, None))
+            start = float(_get(lens, p))
+            if low is not None and high is not None and not low < high:
+                raise ValueError(f"bounds[{name!r}] must satisfy low < high, got {(low, high)}")
+            step = float(scale_vector[i])
+            lower.append(-np.inf if low is None else (low - start) / step)
+            upper.append(np.inf if high is None else (high - start) / step)
+        lower = jnp.asarray(lower, dtype)
+        upper = jnp.asarray(upper, dtype)
+        solution = _solve_lbfgsb(problem, lens, lower, upper, max_steps, atol)
+        jax.block_until_ready(solution)
+        y, iterations = solution.params, int(solution.state.iter_num)
+        converged = float(solution.state.error) <= atol
+        result = "converged" if converged else "stopped (max_steps or line search)"
+        solver_name = "jaxopt.LBFGSB"
+    else:
+        opt = _make_solver(solver, rtol, atol)
+        solution = _solve_optimistix(problem, lens, opt, max_steps)
+        jax.block_until_ready(solution)
+        y, iterations = solution.value, int(solution.stats["num_steps"])
+        result = "converged" if bool(solution.result == optx.RESULTS.successful) else (
+            "not converged: " + optx.RESULTS[solution.result])
+        solver_name = type(opt).__name__
+    wall_time = time.perf_counter() - start_time
+
+    final = problem.design(y, lens)
+    parameters = {v: float(_get(final, p)) for v, p in zip(variables, parsed, strict=True)}
+    weights = np.asarray(problem.field_weights)
+
+    def report(design):
+        per_field, variances, _ = _report(
+            design, problem.u, signal, noise, problem.fields, problem.wavelengths,
+            problem.reference_scale, jmse_items,
+        )
+        per_field = tuple(float(v) for v in np.asarray(per_field))
+        mean_jmse = float(np.sum(weights * np.asarray(per_field)) / np.sum(weights))
+        variance = float(np.sum(weights * np.asarray(variances)) / np.sum(weights))
+        return per_field, mean_jmse, variance
+
+    per_field, mean_jmse, variance = report(final)
+    _, start_jmse, start_variance = report(lens)
+    value = mean_jmse if merit == "jmse" else variance
+    return OptimisationResult(
+        solution=solution, lens=final, start=lens, parameters=parameters, merit=merit,
+        value=value, jmse=mean_jmse, jmse_per_field=per_field,
+        rms_wavefront=math.sqrt(variance), start_jmse=start_jmse,
+        start_rms_wavefront=math.sqrt(start_variance), iterations=iterations,
+        wall_time=wall_time, result=result, solver=solver_name, fields=tuple(fields),
+    )

@@ -1,0 +1,688 @@
+"""Sweeps of a merit over a batch of designs: ``vmap`` in chunks, sharded over devices.
+
+One code path serves a laptop, a GPU and many accelerators: the batch axis is laid on a 1-D
+device mesh (``jax.sharding.Mesh`` over every device, across hosts after
+``jax.distributed.initialize``); each device evaluates its share with
+``lax.map(..., batch_size=batch_size)``, i.e. ``vmap`` over ``batch_size`` designs at a time,
+so memory stays bounded however large the sweep. Results come back to the host in input
+order, with the inputs kept beside them and a status per design.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import importlib
+import json
+import math
+import platform
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+from ._merit import U_MAX, jmse, jmse_options
+from ._numerics import check_count
+
+__all__ = ["SweepResult", "SweepStatus", "hypercube", "sweep", "sweep_jmse"]
+
+#: Name of the mesh axis along which designs are sharded.
+MESH_AXIS = "designs"
+
+_FORMAT = "jmse_jax.sweep/1"
+
+
+class SweepStatus(enum.IntEnum):
+    """Outcome of one design in a sweep (stored as ``int8``; the first that applies wins).
+
+    ``OK`` (0): value (and gradient) finite. ``NONFINITE_INPUT`` (1): a leaf of the design
+    is NaN or infinite. ``INVALID`` (2): the ``valid`` predicate of the sweep returned False
+    (e.g. a field or ``u`` out of range, a non-physical lens). ``NONFINITE_VALUE`` (3): the
+    function returned NaN or infinity (``jmse`` returns ``+inf`` for non-finite input).
+    ``NONFINITE_GRADIENT`` (4): the value is finite but the gradient is not.
+    """
+
+    OK = 0
+    NONFINITE_INPUT = 1
+    INVALID = 2
+    NONFINITE_VALUE = 3
+    NONFINITE_GRADIENT = 4
+
+
+# --------------------------------------------------------------------------------------
+# Result container, with .npz + JSON header persistence
+# --------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SweepResult:
+    """Results of ``sweep``, on the host as NumPy arrays, in the order of the inputs.
+
+    Attributes
+    ----------
+    inputs : pytree of ndarray, leading axis (n,)
+        The batch as evaluated (scalar leaves broadcast, dtype as computed).
+    value : pytree of ndarray, leading axis (n,)
+        What ``fn`` returned for each design. Where ``status != 0`` it is whatever ``fn``
+        gave (``jmse`` gives ``+inf``); select good designs with ``result.ok``.
+    grad : pytree like ``inputs``, or None
+        ``d value / d inputs`` per design when the sweep ran with ``grad=True``.
+    aux : pytree of ndarray, or None
+        The auxiliary output of ``fn`` when the sweep ran with ``has_aux=True``.
+    status : ndarray of int8, shape (n,)
+        ``SweepStatus`` code per design.
+    metadata : dict
+        JSON-serialisable description: devices, batch size, padding, timings, compiled
+        memory, JAX version, and the user's own ``metadata``.
+    """
+
+    inputs: object
+    value: object
+    grad: object
+    aux: object
+    status: np.ndarray
+    metadata: dict
+
+    @property
+    def n_designs(self) -> int:
+        """Number of designs in the sweep."""
+        return int(self.status.shape[0])
+
+    @property
+    def ok(self) -> np.ndarray:
+        """Boolean mask, shape (n,): designs whose status is ``SweepStatus.OK``."""
+        return self.status == SweepStatus.OK
+
+    def status_counts(self) -> dict[str, int]:
+        """Number of designs per status name (only statuses that occur)."""
+        codes, counts = np.unique(self.status, return_counts=True)
+        return {SweepStatus(int(c)).name: int(k) for c, k in zip(codes, counts, strict=True)}
+
+    def save(self, path) -> Path:
+        """Write the result to ``path`` (``.npz`` appended if missing) plus a JSON header.
+
+        Arrays go into an uncompressed ``.npz`` (no pickles); the header (tree structure of
+        every group, status names and ``metadata``) is stored inside it as ``__header__``
+        and also written beside it as ``<path>.json`` for people and other tools.
+
+        Returns
+        -------
+        Path of the ``.npz`` file.
+        """
+        path = Path(path)
+        if path.suffix != ".npz":
+            path = path.with_name(path.name + ".npz")
+        arrays: dict[str, np.ndarray] = {}
+        trees = {}
+        for group in ("inputs", "value", "grad", "aux"):
+            trees[group] = _encode_tree(getattr(self, group), group, arrays)
+        arrays["status"] = np.asarray(self.status, dtype=np.int8)
+        header = {
+            "format": _FORMAT,
+            "n_designs": self.n_designs,
+            "status_names": {int(s): s.name for s in SweepStatus},
+            "status_counts": self.status_counts(),
+            "trees": trees,
+            "metadata": self.metadata,
+        }
+        text = json.dumps(header, indent=2, default=_json_default)
+        arrays["__header__"] = np.array(text)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, **arrays)
+        path.with_name(path.name[: -len(".npz")] + ".json").write_text(text + "\n")
+        return path
+
+    @classmethod
+    def load(cls, path) -> SweepResult:
+        """Read a result written by ``save``; equinox Modules such as ``Seidel`` come back as such.
+
+        Only NumPy's ``.npz`` reader is used (``allow_pickle=False``).
+        """
+        path = Path(path)
+        if not path.exists() and path.suffix != ".npz":
+            path = path.with_name(path.name + ".npz")
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {key: data[key] for key in data.files}
+        header = json.loads(str(arrays.pop("__header__")))
+        if header.get("format") != _FORMAT:
+            raise ValueError(
+                f"{path} is not a jmse_jax sweep result (format {header.get('format')!r})"
+            )
+        groups = {g: _decode_tree(spec, arrays) for g, spec in header["trees"].items()}
+        return cls(status=arrays["status"], metadata=header["metadata"], **groups)
+
+    def __repr__(self) -> str:
+        counts = ", ".join(f"{k}={v}" for k, v in self.status_counts().items())
+        return f"SweepResult(n_designs={self.n_designs}, grad={self.grad is not None}, {counts})"
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(
+        f"metadata value {value!r} of type {type(value).__name__} is not JSON-serialisable"
+    )
+
+
+def _encode_static(value):
+    if isinstance(value, tuple):
+        return {"__tuple__": [_encode_static(v) for v in value]}
+    if isinstance(value, list):
+        return [_encode_static(v) for v in value]
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    raise ValueError(f"cannot save static field value {value!r} of type {type(value).__name__}")
+
+
+def _decode_static(value):
+    if isinstance(value, dict) and "__tuple__" in value:
+        return tuple(_decode_static(v) for v in value["__tuple__"])
+    if isinstance(value, list):
+        return [_decode_static(v) for v in value]
+    return value
+
+
+def _encode_tree(tree, name: str, arrays: dict) -> dict:
+    """JSON description of ``tree``; its array leaves go into ``arrays`` under ``name.*``."""
+    if tree is None:
+        return {"node": "none"}
+    if isinstance(tree, dict):
+        keys = list(tree)
+        if not all(isinstance(k, str) for k in keys):
+            raise ValueError(f"cannot save {name}: dict keys must be strings, got {keys!r}")
+        return {"node": "dict", "keys": keys,
+                "children": [_encode_tree(tree[k], f"{name}.{k}", arrays) for k in keys]}
+    if isinstance(tree, tuple) and hasattr(tree, "_fields"):
+        cls = type(tree)
+        return {"node": "namedtuple", "class": f"{cls.__module__}:{cls.__qualname__}",
+                "fields": list(tree._fields),
+                "children": [_encode_tree(v, f"{name}.{f}", arrays)
+                             for f, v in zip(tree._fields, tree, strict=True)]}
+    if isinstance(tree, (list, tuple)):
+        return {"node": type(tree).__name__,
+                "children": [_encode_tree(v, f"{name}.{i}", arrays) for i, v in enumerate(tree)]}
+    if isinstance(tree, eqx.Module):
+        cls = type(tree)
+        fields, static, children = [], {}, []
+        for field in dataclasses.fields(tree):
+            value = getattr(tree, field.name)
+            if field.metadata.get("static", False):
+                static[field.name] = _encode_static(value)
+            else:
+                fields.append(field.name)
+                children.append(_encode_tree(value, f"{name}.{field.name}", arrays))
+        return {"node": "module", "class": f"{cls.__module__}:{cls.__qualname__}",
+                "fields": fields, "static": static, "children": children}
+    if isinstance(tree, (np.ndarray, np.generic, jax.Array, float, int, complex, bool)):
+        key = f"{name}"
+        if key in arrays or key in ("status", "__header__"):
+            raise ValueError(f"cannot save: two leaves would be stored under {key!r}")
+        arrays[key] = np.asarray(tree)
+        return {"node": "leaf", "key": key}
+    raise ValueError(
+        f"cannot save {name} of type {type(tree).__name__}: use dicts, lists, tuples, "
+        "namedtuples or equinox Modules of arrays"
+    )
+
+
+def _import_class(path: str):
+    module_name, qualname = path.split(":")
+    obj = importlib.import_module(module_name)
+    for part in qualname.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def _decode_tree(spec: dict, arrays: dict):
+    node = spec["node"]
+    if node == "none":
+        return None
+    if node == "leaf":
+        return arrays[spec["key"]]
+    children = [_decode_tree(child, arrays) for child in spec.get("children", [])]
+    if node == "dict":
+        return dict(zip(spec["keys"], children, strict=True))
+    if node == "list":
+        return children
+    if node == "tuple":
+        return tuple(children)
+    values = dict(zip(spec["fields"], children, strict=True))
+    if node == "namedtuple":
+        return _import_class(spec["class"])(**values)
+    # An equinox Module is a frozen dataclass: set its fields directly, without re-running
+    # an __init__ that may not accept batched leaves (Zernike checks its shape).
+    cls = _import_class(spec["class"])
+    module = object.__new__(cls)
+    for key, value in values.items():
+        object.__setattr__(module, key, value)
+    for key, value in spec["static"].items():
+        object.__setattr__(module, key, _decode_static(value))
+    return module
+
+
+# --------------------------------------------------------------------------------------
+# The sweep
+# --------------------------------------------------------------------------------------
+
+
+def _host_batch(batch):
+    """Validate ``batch`` and return it as NumPy leaves of a common leading length ``n``."""
+    leaves_with_paths, treedef = jax.tree_util.tree_flatten_with_path(batch)
+    if not leaves_with_paths:
+        raise ValueError("batch must contain at least one array leaf, got an empty pytree")
+    leaves, lengths = [], {}
+    for path, leaf in leaves_with_paths:
+        arr = np.asarray(leaf)
+        if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
+            raise ValueError(
+                f"batch{jax.tree_util.keystr(path)} must be numeric, got dtype {arr.dtype}"
+            )
+        arr = arr.astype(jax.dtypes.canonicalize_dtype(arr.dtype), copy=False)
+        if arr.ndim >= 1:
+            lengths[jax.tree_util.keystr(path)] = arr.shape[0]
+        leaves.append(arr)
+    if not lengths:
+        raise ValueError(
+            "batch must have at least one leaf with a leading (design) axis; every leaf is a scalar"
+        )
+    distinct = sorted(set(lengths.values()))
+    if len(distinct) > 1:
+        listing = ", ".join(f"batch{k}: {v}" for k, v in lengths.items())
+        raise ValueError(f"every leaf of batch must have the same leading length; got {listing}")
+    n = distinct[0]
+    if n < 1:
+        raise ValueError("batch must hold at least one design, got a leading length of 0")
+    # Scalars are shared by every design (e.g. the zero coefficients of a Seidel).
+    leaves = [np.broadcast_to(a, (n,)).copy() if a.ndim == 0 else a for a in leaves]
+    return jax.tree_util.tree_unflatten(treedef, leaves), n
+
+
+def _resolve_devices(devices) -> list:
+    if devices is None:
+        return list(jax.devices())
+    if isinstance(devices, (int, np.integer)) and not isinstance(devices, bool):
+        available = jax.devices()
+        if not 1 <= devices <= len(available):
+            raise ValueError(
+                f"devices must be in [1, {len(available)}] (the devices JAX sees), got {devices}"
+            )
+        return list(available[:devices])
+    devices = list(devices)
+    if not devices:
+        raise ValueError("devices must be None, a count >= 1 or a non-empty list of jax devices")
+    return devices
+
+
+def _all_finite(tree):
+    leaves = [jnp.all(jnp.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(tree)
+              if jnp.issubdtype(jnp.result_type(leaf), jnp.inexact)]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
+
+
+def _make_evaluate(fn, grad, has_aux, valid):
+    """Per-design function: (value, grad, aux, status) for one unbatched design."""
+
+    def evaluate(design):
+        if grad:
+            (value, aux), gradient = jax.value_and_grad(
+                fn if has_aux else (lambda d: (fn(d), None)), has_aux=True
+            )(design)
+        else:
+            value, aux = fn(design) if has_aux else (fn(design), None)
+            gradient = None
+        status = jnp.where(_all_finite(gradient), SweepStatus.OK, SweepStatus.NONFINITE_GRADIENT)
+        status = jnp.where(_all_finite(value), status, SweepStatus.NONFINITE_VALUE)
+        if valid is not None:
+            status = jnp.where(jnp.asarray(valid(design), bool), status, SweepStatus.INVALID)
+        status = jnp.where(_all_finite(design), status, SweepStatus.NONFINITE_INPUT)
+        return value, gradient, aux, status.astype(jnp.int8)
+
+    return evaluate
+
+
+def _global_array(host: np.ndarray, sharding) -> jax.Array:
+    """A global array laid out by ``sharding`` from data every process holds in full."""
+    return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
+
+
+def _to_host(tree):
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        return multihost_utils.process_allgather(tree, tiled=True)
+    return jax.tree_util.tree_map(np.asarray, tree)
+
+
+def sweep(
+    fn: Callable,
+    batch,
+    *,
+    grad: bool = False,
+    has_aux: bool = False,
+    valid: Callable | None = None,
+    batch_size: int = 16,
+    chunks_per_call: int = 1,
+    devices: int | Sequence | None = None,
+    progress: bool | None = None,
+    metadata: dict | None = None,
+) -> SweepResult:
+    """Evaluate ``fn`` on every design of ``batch``, vectorised, chunked and sharded.
+
+    ``fn`` is written for one design; the sweep ``vmap``s it over ``batch_size`` designs at a
+    time per device (``lax.map(fn, ..., batch_size=batch_size)``) and lays the design axis
+    on a 1-D mesh over ``devices`` with ``jax.shard_map``. The padded tail is dropped and
+    the results are returned in input order. The same call runs on one CPU, on several
+    GPUs, and on several hosts after ``jax.distributed.initialize()`` (every process calls
+    ``sweep`` with the same ``batch``; every process receives the whole result).
+
+    Parameters
+    ----------
+    fn : callable ``design -> value`` (or ``-> (value, aux)`` with ``has_aux``)
+        Pure and traceable. It must report a failed design through its value (NaN or
+        infinity, as ``jmse`` does) rather than by raising: a Python exception or a runtime
+        error check stops the whole sweep.
+    batch : pytree of arrays, leading axis (n,)
+        The designs, e.g. ``{"aberrations": Seidel(w020=array(n), ...), "field": array(n)}``
+        (see ``hypercube``). Scalar leaves are shared by every design. Leaves with a
+        leading axis must all have the same length ``n >= 1``.
+    grad : bool
+        Also return ``d value / d design`` (``jax.value_and_grad``); the value must then be
+        a real scalar and every leaf of ``batch`` floating point.
+    has_aux : bool
+        ``fn`` returns ``(value, aux)``; ``aux`` (a pytree of arrays) is kept per design.
+    valid : callable ``design -> bool``, optional
+        Traceable predicate; designs for which it is False get ``SweepStatus.INVALID``.
+    batch_size : int >= 1
+        Designs evaluated together (one ``vmap``) on each device. Memory per device is
+        about ``batch_size`` times the memory of one design in flight, which
+        ``result.metadata["memory"]["temp_bytes"] / batch_size`` reports (XLA's temporary
+        buffers of the compiled sweep). For the singlet lens + ``jmse`` in float64 on CPU
+        (``benchmarks/sweep_bench.py``) it is about 30 MB (value) and 40 MB (value and
+        gradient) with ``preset="fast"``, and 110 MB and 140 MB with ``"default"``.
+    chunks_per_call : int >= 1
+        Chunks of ``batch_size`` designs each device works through (``lax.map``) per call
+        from the host. The host loops over calls, updating the progress bar after each; more
+        chunks per call means fewer round trips but coarser progress and more padding.
+    devices : None, int or sequence of jax devices
+        ``None``: every device JAX sees (all hosts); an int ``k``: the first ``k``.
+    progress : bool, optional
+        Show a tqdm progress bar, updated after each call. Default: on when stderr is a
+        terminal and the sweep takes more than one call.
+    metadata : dict, optional
+        JSON-serialisable values stored in ``result.metadata["user"]``.
+
+    Returns
+    -------
+    SweepResult
+        ``value``, ``grad``, ``aux`` and ``status`` per design, ``inputs`` beside them.
+
+    Notes
+    -----
+    The batch is padded, by repeating its last design, to a whole number of calls of
+    ``devices * chunks_per_call * batch_size`` designs, so every device runs the same
+    program on the same shapes whatever the number of devices, and no data moves between
+    devices. For given ``batch_size`` and ``chunks_per_call`` the results on 2, 4, ...
+    devices, with or without a progress bar, are the same bit for bit (the tests check this
+    in float64 on fake CPU devices). On one device XLA compiles the program without the
+    sharded wrapper and may lay out and fuse a few operations differently: values then agree
+    bit for bit in the tests, gradients to a few ulp. Another ``batch_size`` or
+    ``chunks_per_call`` may also change the last bits.
+
+    Examples
+    --------
+    >>> import jax, numpy as np
+    >>> import jmse_jax as jj
+    >>> designs = jj.hypercube(x=np.linspace(0.0, 1.0, 3), y=np.array([1.0, 2.0]))
+    >>> result = jj.sweep(lambda d: d["x"] * d["y"], designs, batch_size=2, progress=False)
+    >>> result.value.tolist()
+    [0.0, 0.0, 0.5, 1.0, 1.0, 2.0]
+    """
+    if not callable(fn):
+        raise ValueError(f"fn must be callable, got {type(fn).__name__}")
+    check_count("batch_size", batch_size)
+    check_count("chunks_per_call", chunks_per_call)
+    host_batch, n = _host_batch(batch)
+    if grad:
+        for path, leaf in jax.tree_util.tree_leaves_with_path(host_batch):
+            if not np.issubdtype(leaf.dtype, np.floating):
+                raise ValueError(
+                    f"grad=True needs floating-point designs; batch{jax.tree_util.keystr(path)} "
+                    f"has dtype {leaf.dtype}"
+                )
+    devices = _resolve_devices(devices)
+    n_devices = len(devices)
+    evaluate = _make_evaluate(fn, grad, has_aux, valid)
+
+    if grad:  # check fn's output on one design before compiling the sweep
+        example = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape[1:], a.dtype),
+                                         host_batch)
+        value_shape = jax.eval_shape(fn, example)
+        if has_aux:
+            value_shape = value_shape[0]
+        if not (isinstance(value_shape, jax.ShapeDtypeStruct) and value_shape.shape == ()
+                and jnp.issubdtype(value_shape.dtype, jnp.floating)):
+            raise ValueError(
+                f"grad=True needs fn to return a real scalar per design, got {value_shape}"
+            )
+
+    call_size = chunks_per_call * n_devices * batch_size
+    n_calls = math.ceil(n / call_size)
+    if progress is None:
+        progress = n_calls > 1 and sys.stderr.isatty()
+    progress = bool(progress) and jax.process_index() == 0
+    padded = n_calls * call_size
+
+    def pad(leaf):
+        return np.concatenate([leaf, np.repeat(leaf[-1:], padded - n, axis=0)], axis=0)
+
+    padded_batch = jax.tree_util.tree_map(pad, host_batch)
+
+    mesh = Mesh(np.asarray(devices, dtype=object), (MESH_AXIS,))
+    sharding = NamedSharding(mesh, PartitionSpec(MESH_AXIS))
+
+    def local_sweep(designs):
+        return jax.lax.map(evaluate, designs, batch_size=batch_size)
+
+    # Trace the per-device program once and pass its array constants (quadrature nodes,
+    # interpolation matrices) as replicated arguments. Otherwise XLA optimises the one-device
+    # program, whose body it sees inline with the constants, differently from the sharded
+    # one, whose body receives them as operands, and the two differ in the last bits.
+    started = time.perf_counter()
+    local_shape = jax.tree_util.tree_map(
+        lambda a: jax.ShapeDtypeStruct((chunks_per_call * batch_size, *a.shape[1:]), a.dtype),
+        host_batch)
+    closed, out_shape = jax.make_jaxpr(local_sweep, return_shape=True)(local_shape)
+    out_tree = jax.tree_util.tree_structure(out_shape)
+    replicated = NamedSharding(mesh, PartitionSpec())
+    consts = [_global_array(np.asarray(c), replicated) for c in closed.consts]
+
+    def local_program(consts, designs):
+        flat = jax.core.eval_jaxpr(closed.jaxpr, consts, *jax.tree_util.tree_leaves(designs))
+        return jax.tree_util.tree_unflatten(out_tree, flat)
+
+    sharded_sweep = jax.jit(
+        jax.shard_map(local_program, mesh=mesh,
+                      in_specs=(PartitionSpec(), PartitionSpec(MESH_AXIS)),
+                      out_specs=PartitionSpec(MESH_AXIS)),
+    )
+
+    def device_block(start):
+        return jax.tree_util.tree_map(
+            lambda leaf: _global_array(leaf[start:start + call_size], sharding), padded_batch)
+
+    first = device_block(0)
+    compiled = sharded_sweep.lower(consts, first).compile()
+    compile_s = time.perf_counter() - started
+    memory = _memory_stats(compiled)
+
+    outputs = []
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=n, unit="design", desc="sweep")
+    pending = None
+    for call in range(n_calls):
+        block = first if call == 0 else device_block(call * call_size)
+        result = compiled(consts, block)
+        if pending is not None:  # dispatch is asynchronous: wait for the previous call only
+            outputs.append(_to_host(pending))
+            if bar is not None:
+                bar.update(min(call * call_size, n) - bar.n)
+        pending = result
+    outputs.append(_to_host(pending))
+    if bar is not None:
+        bar.update(n - bar.n)
+        bar.close()
+    elapsed_s = time.perf_counter() - started
+
+    def assemble(*parts):
+        return np.concatenate(parts, axis=0)[:n]
+
+    value, gradient, aux, status = jax.tree_util.tree_map(assemble, *outputs)
+    run_s = elapsed_s - compile_s
+    info = {
+        "n_designs": n,
+        "grad": bool(grad),
+        "has_aux": bool(has_aux),
+        "batch_size": batch_size,
+        "n_devices": n_devices,
+        "device_kind": devices[0].device_kind,
+        "platform": devices[0].platform,
+        "process_count": jax.process_count(),
+        "padded_designs": padded,
+        "calls": n_calls,
+        "chunks_per_call": chunks_per_call,
+        "compile_s": compile_s,
+        "run_s": run_s,
+        "designs_per_second": n / run_s if run_s > 0 else None,
+        "memory": memory,
+        "dtypes": sorted({str(leaf.dtype) for leaf in jax.tree_util.tree_leaves(host_batch)}),
+        "jax_version": jax.__version__,
+        "python": platform.python_version(),
+        "user": dict(metadata or {}),
+    }
+    json.dumps(info, default=_json_default)  # fail now, not at save time
+    return SweepResult(inputs=host_batch, value=value, grad=gradient, aux=aux, status=status,
+                       metadata=info)
+
+
+def _memory_stats(compiled) -> dict | None:
+    """XLA's memory figures for the compiled sweep, per device (bytes), when it gives them."""
+    try:
+        stats = compiled.memory_analysis()
+    except Exception:  # not every backend implements it
+        return None
+    if stats is None:
+        return None
+    return {
+        "argument_bytes": int(stats.argument_size_in_bytes),
+        "output_bytes": int(stats.output_size_in_bytes),
+        "temp_bytes": int(stats.temp_size_in_bytes),
+        "generated_code_bytes": int(stats.generated_code_size_in_bytes),
+    }
+
+
+def hypercube(**axes) -> dict[str, np.ndarray]:
+    """Every combination of the given 1-D axes, flattened in C order (the last axis fastest).
+
+    Parameters
+    ----------
+    **axes : 1-D array_like, each non-empty
+        One axis per name, e.g. ``w020=np.linspace(-3, 3, 25)``.
+
+    Returns
+    -------
+    dict of ndarray, each of shape ``(prod(len(axis)),)``
+
+    Examples
+    --------
+    >>> import jmse_jax as jj
+    >>> cube = jj.hypercube(w020=[0.0, 1.0], field=[0.0, 0.5, 1.0])
+    >>> cube["w020"].tolist(), cube["field"].tolist()
+    ([0.0, 0.0, 0.0, 1.0, 1.0, 1.0], [0.0, 0.5, 1.0, 0.0, 0.5, 1.0])
+    """
+    if not axes:
+        raise ValueError("hypercube needs at least one axis, e.g. hypercube(w020=[0.0, 1.0])")
+    arrays = {}
+    for name, values in axes.items():
+        arr = np.asarray(values)
+        if arr.ndim != 1 or arr.size == 0:
+            raise ValueError(f"axis {name} must be a non-empty 1-D array, got shape {arr.shape}")
+        arrays[name] = arr
+    grids = np.meshgrid(*arrays.values(), indexing="ij")
+    return {name: grid.reshape(-1) for name, grid in zip(arrays, grids, strict=True)}
+
+
+def sweep_jmse(
+    aberrations,
+    field,
+    u,
+    signal,
+    noise,
+    *,
+    grad: bool = False,
+    preset: str = "default",
+    batch_size: int = 16,
+    chunks_per_call: int = 1,
+    devices: int | Sequence | None = None,
+    progress: bool | None = None,
+    metadata: dict | None = None,
+    **options,
+) -> SweepResult:
+    """``jmse`` over a batch of aberrations, fields and Nyquist ratios ``u`` (see ``sweep``).
+
+    Parameters
+    ----------
+    aberrations : Seidel or Zernike with leaves of leading axis (n,) [waves]
+        Scalar leaves are shared by every design.
+    field : float or array, shape (n,) [fraction of the full field]
+    u : float or array, shape (n,) [sensor Nyquist / optical cutoff]
+    signal, noise : fixed for the whole sweep (as in ``jmse``)
+    grad : bool
+        Also return the gradient with respect to the aberrations, ``field`` and ``u``.
+    preset, **options
+        ``jmse`` options, checked before anything is compiled.
+    batch_size, chunks_per_call, devices, progress, metadata
+        As in ``sweep``.
+
+    Returns
+    -------
+    SweepResult
+        ``inputs`` is ``{"aberrations": ..., "field": ..., "u": ...}``. Designs with a
+        field outside ``[0, 1]`` or ``u`` outside ``(0, 1.5]`` get ``SweepStatus.INVALID``;
+        non-finite ones ``NONFINITE_INPUT`` (their value is ``+inf``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import jmse_jax as jj
+    >>> cube = jj.hypercube(w020=np.linspace(-1.0, 1.0, 3), field=[0.0, 1.0])
+    >>> result = jj.sweep_jmse(jj.Seidel(w020=cube["w020"], w222=0.5), cube["field"], 0.2,
+    ...                        jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3), preset="fast",
+    ...                        progress=False)
+    >>> result.value.shape, result.status_counts()
+    ((6,), {'OK': 6})
+    """
+    jmse_options(preset, **options)  # ValueError now for a bad option
+
+    def merit(design):
+        return jmse(design["aberrations"], design["field"], design["u"], signal, noise,
+                    preset=preset, **options)
+
+    def in_range(design):
+        f, v = design["field"], design["u"]
+        return (f >= 0.0) & (f <= 1.0) & (v > 0.0) & (v <= U_MAX)
+
+    batch = {"aberrations": aberrations, "field": field, "u": u}
+    return sweep(merit, batch, grad=grad, valid=in_range, batch_size=batch_size,
+                 chunks_per_call=chunks_per_call, devices=devices, progress=progress,
+                 metadata=metadata)

@@ -1,0 +1,103 @@
+"""Wavefront models: Seidel formula (SPEC §2) and Noll-indexed Zernike polynomials."""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from oracles import SEIDEL_KEYS, seidel_wavefront
+
+import jmse_jax as jj
+
+# Noll (1976) table: j -> (n, m), m > 0 the cos(m theta) term, m < 0 the sin term.
+NOLL_TABLE = {
+    1: (0, 0), 2: (1, 1), 3: (1, -1), 4: (2, 0), 5: (2, -2), 6: (2, 2), 7: (3, -1), 8: (3, 1),
+    9: (3, -3), 10: (3, 3), 11: (4, 0), 12: (4, 2), 13: (4, -2), 14: (4, 4), 15: (4, -4),
+}
+
+
+def test_seidel_wavefront_matches_spec_formula():
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        coefficients = dict(zip(SEIDEL_KEYS, rng.uniform(-6, 6, len(SEIDEL_KEYS)), strict=True))
+        field = rng.uniform(0, 1)
+        x, y = rng.uniform(-1, 1, (2, 50))
+        got = jj.wavefront(jj.Seidel(**coefficients), jnp.asarray(x), jnp.asarray(y), field)
+        np.testing.assert_allclose(got, seidel_wavefront(coefficients, x, y, field),
+                                   rtol=1e-13, atol=1e-12)
+
+
+def test_seidel_terms_individually():
+    # Pupil point on +y at rho = 1, field 1: every term equals its coefficient.
+    for key in SEIDEL_KEYS:
+        ab = jj.Seidel(**{key: 0.7})
+        assert float(jj.wavefront(ab, 0.0, 1.0, 1.0)) == pytest.approx(0.7, rel=1e-15)
+    # The field point is on +y: at the pupil point (1, 0) every y-dependent term vanishes.
+    ab = jj.Seidel(w131=1.0, w222=1.0, w111=1.0, w311=1.0)
+    assert float(jj.wavefront(ab, 1.0, 0.0, 1.0)) == 0.0
+    assert float(jj.wavefront(ab, 0.0, -0.5, 1.0)) == pytest.approx(-0.125 + 0.25 - 0.5 - 0.5)
+
+
+def test_seidel_is_even_in_x():
+    ab = jj.Seidel(w020=1.1, w040=-2.0, w131=0.7, w222=1.3, w220=-0.4, w311=0.2, w111=0.9)
+    x, y = np.linspace(-0.9, 0.9, 7), np.linspace(0.8, -0.8, 7)
+    np.testing.assert_array_equal(jj.wavefront(ab, x, y, 0.6), jj.wavefront(ab, -x, y, 0.6))
+    assert ab.x_symmetric
+
+
+@pytest.mark.parametrize("j", range(1, 16))
+def test_noll_to_nm_standard_table(j):
+    assert jj.noll_to_nm(j) == NOLL_TABLE[j]
+
+
+def test_noll_to_nm_beyond_table():
+    # n = 5, 6 rows, checked against counting: j in n(n+1)/2 + 1 .. (n+1)(n+2)/2.
+    assert jj.noll_to_nm(16) == (5, 1)
+    assert jj.noll_to_nm(21) == (5, -5)
+    assert jj.noll_to_nm(22) == (6, 0)
+    with pytest.raises(ValueError, match="noll index must be an integer >= 1, got 0"):
+        jj.noll_to_nm(0)
+
+
+def _zernike_reference(j, x, y):
+    """Noll-normalised Z_j from the explicit formulas (theta measured from +y)."""
+    rho = np.hypot(x, y)
+    theta = np.arctan2(x, y)
+    n, m = NOLL_TABLE[j]
+    radial = sum((-1) ** k * math.factorial(n - k)
+                 / (math.factorial(k) * math.factorial((n + abs(m)) // 2 - k)
+                    * math.factorial((n - abs(m)) // 2 - k)) * rho ** (n - 2 * k)
+                 for k in range((n - abs(m)) // 2 + 1))
+    if m == 0:
+        return math.sqrt(n + 1) * radial
+    trig = np.cos(m * theta) if m > 0 else np.sin(-m * theta)
+    return math.sqrt(2 * (n + 1)) * radial * trig
+
+
+@pytest.mark.parametrize("j", range(1, 16))
+def test_zernike_polynomials_match_explicit_formula(j):
+    rng = np.random.default_rng(j)
+    rho, theta = np.sqrt(rng.uniform(0, 1, 40)), rng.uniform(0, 2 * np.pi, 40)
+    x, y = rho * np.sin(theta), rho * np.cos(theta)
+    got = jj.wavefront(jj.Zernike([1.0], noll=(j,)), x, y)
+    np.testing.assert_allclose(got, _zernike_reference(j, x, y), atol=1e-13)
+
+
+def test_zernike_wavefront_is_a_sum_and_x_symmetry_flag():
+    coefficients = [0.1, -0.2, 0.3, 0.5, -0.4]
+    ab = jj.Zernike(coefficients, noll=(1, 2, 3, 4, 5))
+    x, y = 0.3, -0.6
+    expected = sum(c * _zernike_reference(j, np.array(x), np.array(y))
+                   for c, j in zip(coefficients, (1, 2, 3, 4, 5), strict=True))
+    assert float(jj.wavefront(ab, x, y, 0.5)) == pytest.approx(float(expected), rel=1e-13)
+    assert not ab.x_symmetric
+    assert jj.Zernike([1.0, 1.0], noll=(4, 11)).x_symmetric
+
+
+def test_zernike_bad_input():
+    with pytest.raises(ValueError, match="noll must list one index per coefficient"):
+        jj.Zernike([1.0, 2.0], noll=(4,))
+    with pytest.raises(ValueError, match="noll index must be an integer >= 1, got 0"):
+        jj.Zernike([1.0], noll=(0,))

@@ -1,0 +1,237 @@
+"""The JMSE merit and the paper's baseline: SPEC §5 values, oracles and the problem bank."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import oracles
+import problems
+import pytest
+from compiled import jmse_fn
+from conftest import FIG1_BASELINE_B64, FIG1_COEFFICIENTS, FIG1_JMSE
+from scipy import integrate
+
+import jmse_jax as jj
+
+CONVERGED = [p for p in problems.PROBLEMS if p.converged]
+UNCONVERGED = [p for p in problems.PROBLEMS if not p.converged]
+
+# The one converged case where the default preset misses 1e-4 (measured 1.7e-4 on 2026-11-22):
+# every coefficient at 5 waves (about 25 waves of aberration in all); its OTF falls from 1 to
+# ~0 within |nu| ~ 0.01 and the default's polar OTF nodes resolve it only to ~2e-4. The
+# "high" preset is checked on it at 1e-5 instead (see test_high_preset_on_default_misses).
+DEFAULT_MISSES = {"all_5_field_0.8": 3e-4}
+
+
+def test_fig1_high_preset_matches_spec(fig1):
+    value = float(jmse_fn(preset="high")(*fig1))
+    assert value == pytest.approx(FIG1_JMSE, rel=1e-6)
+
+
+def test_fig1_baseline_matches_spec(fig1):
+    value = float(jj.baseline_jmse(*fig1, B=64))
+    assert value == pytest.approx(FIG1_BASELINE_B64, rel=1e-6)
+    assert value / FIG1_JMSE - 1 == pytest.approx(-0.08, abs=0.005)  # SPEC §5: -8 %
+
+
+@pytest.mark.parametrize("B", [32, 64])
+@pytest.mark.parametrize("case", ["fig1", "powerlaw_defocus_m3_u_0.4"])
+def test_baseline_equals_numpy_oracle(case, B):
+    problem = problems.PROBLEMS_BY_NAME[case]
+    kind, *params = problem.signal
+    psd = oracles.markov_psd if kind == "markov" else oracles.power_law_psd
+    expected = oracles.baseline_jmse(problem.coefficients, problem.field, problem.u,
+                                     lambda r: psd(r, *params), problem.noise_variance, B)
+    got = float(jj.baseline_jmse(*problem.arguments(), B=B))
+    assert got == pytest.approx(expected, rel=1e-12)
+
+
+def _diffraction_limited_oracle(u, variance=1.0, mu=5.0, noise=1e-3):
+    """JMSE of the aberration-free lens by SciPy: (1/2 pi) ∫∫_band S_e(H0(|nu|))."""
+    def s_e(r):
+        s_x = oracles.markov_psd(r, variance, mu)
+        return oracles.error_spectral_density(oracles.diffraction_limited_otf(r), s_x, noise)
+
+    if u < 1:  # the band lies in the disc's bounding square; integrate it directly
+        total = oracles.square_integral(lambda x, y: s_e(np.hypot(x, y)), u)
+    else:  # the disc lies inside the band: S_e = S_x outside it
+        inside, _ = integrate.quad(
+            lambda r: (s_e(r) - oracles.markov_psd(r, variance, mu)) * r, 0, 1,
+            epsabs=1e-15, epsrel=1e-13, limit=200)
+        total = 2 * math.pi * inside + oracles.square_integral(
+            lambda x, y: oracles.markov_psd(np.hypot(x, y), variance, mu), u)
+    return total / (2 * math.pi)
+
+
+@pytest.mark.parametrize("u", [0.2, 0.7, 1.5])
+def test_diffraction_limited_jmse_equals_scipy_oracle(u):
+    """An end-to-end oracle, including a band whose corners lie past the cutoff."""
+    value = float(jmse_fn()(jj.Seidel(), 0.0, u, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)))
+    assert value == pytest.approx(_diffraction_limited_oracle(u), rel=1e-6)
+
+
+@pytest.mark.parametrize("problem", CONVERGED, ids=lambda p: p.name)
+def test_default_matches_bank_reference(problem):
+    value = float(jmse_fn()(*problem.arguments()))
+    assert value == pytest.approx(problem.reference, rel=DEFAULT_MISSES.get(problem.name, 1e-4))
+
+
+@pytest.mark.parametrize("name", sorted(DEFAULT_MISSES))
+def test_high_preset_on_default_misses(name):
+    problem = problems.PROBLEMS_BY_NAME[name]
+    value = float(jmse_fn(preset="high")(*problem.arguments()))
+    assert value == pytest.approx(problem.reference, rel=1e-5)
+
+
+@pytest.mark.parametrize("problem", UNCONVERGED, ids=lambda p: p.name)
+def test_default_near_unconverged_reference(problem):
+    """References only good to a few 1e-5 (see problems.py): a looser check, 1e-3."""
+    assert problem.convergence < 1e-4
+    value = float(jmse_fn()(*problem.arguments()))
+    assert value == pytest.approx(problem.reference, rel=1e-3)
+
+
+def test_bank_is_well_formed():
+    assert len(problems.PROBLEMS) >= 20
+    assert len({p.name for p in problems.PROBLEMS}) == len(problems.PROBLEMS)
+    assert set(problems.REFERENCES) == {p.name for p in problems.PROBLEMS}
+    assert len(CONVERGED) >= 15
+    for p in problems.PROBLEMS:
+        assert all(abs(v) <= 6 for v in p.coefficients.values())
+        assert 0 <= p.field <= 1 and 0.1 <= p.u <= 0.5 and 1e-4 <= p.noise_variance <= 1e-2
+    assert FIG1_JMSE == pytest.approx(problems.PROBLEMS_BY_NAME["fig1"].reference, rel=1e-7)
+
+
+def _relative_errors(options, cases):
+    fn = jmse_fn(**options)
+    return np.array([abs(float(fn(*p.arguments())) - p.reference) / p.reference for p in cases])
+
+
+# Cases where all three presets have errors well above rounding (so the order is meaningful).
+ORDERING_CASES = ["defocus_m6", "field_curvature_6_u_0.1", "hypercube_0", "hypercube_3"]
+
+
+def test_preset_ordering():
+    """More nodes, smaller worst-case error: fast >= default >= high on the bank."""
+    sizes = {name: math.prod(o["nodes"]) * math.prod(o["overlap_nodes"])
+             for name, o in jj.PRESETS.items()}
+    assert sizes["fast"] < sizes["default"] < sizes["high"]
+    cases = [problems.PROBLEMS_BY_NAME[n] for n in ORDERING_CASES
+             if problems.PROBLEMS_BY_NAME[n].converged]
+    worst = {preset: _relative_errors(dict(preset=preset), cases).max()
+             for preset in ("fast", "default", "high")}
+    assert worst["fast"] >= worst["default"] >= worst["high"]
+    assert worst["fast"] < 1e-2
+
+
+@pytest.mark.slow
+def test_preset_ordering_whole_bank():
+    worst = {preset: _relative_errors(dict(preset=preset), CONVERGED).max()
+             for preset in ("fast", "default", "high")}
+    assert worst["fast"] >= worst["default"] >= worst["high"]
+
+
+def test_other_quadratures_and_engines_agree(fig1):
+    reference = problems.PROBLEMS_BY_NAME["fig1"].reference
+    gauss = float(jmse_fn(quadrature="gauss", nodes=32)(*fig1))
+    assert gauss == pytest.approx(reference, rel=1e-4)
+    nudft = float(jmse_fn(otf_method="nudft", B=128)(*fig1))
+    assert nudft == pytest.approx(reference, rel=2e-2)
+
+
+def test_zernike_aberrations_use_the_mirrored_band(fig1):
+    """A Zernike fit of the Seidel wavefront (not flagged x-symmetric) gives the same JMSE."""
+    ab, field, u, signal, noise = fig1
+    grid = jj.PolarGrid(3, 10)
+    fit = jj.zernike_fit(jj.sample_opd(ab, grid, field), grid)
+    assert not fit.x_symmetric
+    fast = jmse_fn(preset="fast")
+    assert float(fast(fit, field, u, signal, noise)) == pytest.approx(
+        float(fast(ab, field, u, signal, noise)), rel=1e-10)
+
+
+def test_float32_inputs_give_float32_result():
+    f32 = jnp.float32
+    ab = jj.Seidel(**{k: f32(v) for k, v in FIG1_COEFFICIENTS.items()})
+    value = jmse_fn()(ab, f32(0.95), f32(0.2), jj.MarkovSignal(f32(1.0), f32(5.0)),
+                      jj.WhiteNoise(f32(1e-3)))
+    assert value.dtype == jnp.float32
+    assert float(value) == pytest.approx(FIG1_JMSE, rel=1e-3)
+
+
+# -------------------------------------------------------------------------------------
+# Bad input
+# -------------------------------------------------------------------------------------
+
+
+def _call(fig1, fn=jj.jmse, **changes):
+    ab, field, u, signal, noise = fig1
+    arguments = dict(aberrations=ab, field=field, u=u, signal=signal, noise=noise)
+    options = {k: v for k, v in changes.items() if k not in arguments}
+    arguments.update({k: v for k, v in changes.items() if k in arguments})
+    return fn(arguments.pop("aberrations"), arguments.pop("field"), arguments.pop("u"),
+              arguments.pop("signal"), arguments.pop("noise"), **options)
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        (dict(u=0.0), r"u must be in \(0\.0, 1\.5\], got 0\.0"),
+        (dict(u=-0.2), r"u must be in \(0\.0, 1\.5\], got -0\.2"),
+        (dict(u=float("nan")), r"u must be finite and in \(0\.0, 1\.5\], got nan"),
+        (dict(u=float("inf")), r"u must be finite and in \(0\.0, 1\.5\], got inf"),
+        (dict(u=1.6), r"u must be in \(0\.0, 1\.5\], got 1\.6"),
+        (dict(field=-0.1), r"field must be in \[0\.0, 1\.0\], got -0\.1"),
+        (dict(field=1.2), r"field must be in \[0\.0, 1\.0\], got 1\.2"),
+        (dict(nodes=0), r"nodes\[0\] must be an integer >= 1, got 0"),
+        (dict(overlap_nodes=(0, 8)), r"overlap_nodes\[0\] must be an integer >= 1, got 0"),
+        (dict(se_nodes=(64, -1)), r"se_nodes\[1\] must be an integer >= 1, got -1"),
+        (dict(quadrature="gauss", nodes=0), r"nodes must be an integer >= 1, got 0"),
+        (dict(quadrature="bogus"), r"quadrature must be one of 'polar', .*, got 'bogus'"),
+        (dict(preset="bogus"), r"preset must be one of 'fast', 'default', 'high', got 'bogus'"),
+        (dict(otf_method="bogus"), r"otf_method must be one of .*, got 'bogus'"),
+        (dict(otf_method="nudft", B=0), r"B must be an integer >= 1, got 0"),
+        (dict(aberrations=jj.Seidel(w020=float("nan"))),
+         r"aberrations\.w020 must be finite, got nan"),
+        (dict(aberrations=jj.Seidel(w222=float("inf"))),
+         r"aberrations\.w222 must be finite, got inf"),
+    ],
+)
+def test_jmse_bad_input_raises(fig1, changes, match):
+    with pytest.raises(ValueError, match=match):
+        _call(fig1, **changes)
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        (dict(B=0), r"B must be an integer >= 1, got 0"),
+        (dict(u=2.0), r"u must be in \(0\.0, 1\.5\], got 2\.0"),
+        (dict(field=1.2), r"field must be in \[0\.0, 1\.0\], got 1\.2"),
+        (dict(aberrations=jj.Seidel(w040=float("nan"))),
+         r"aberrations\.w040 must be finite, got nan"),
+    ],
+)
+def test_baseline_bad_input_raises(fig1, changes, match):
+    with pytest.raises(ValueError, match=match):
+        _call(fig1, fn=jj.baseline_jmse, **changes)
+
+
+def test_unknown_option_raises(fig1):
+    with pytest.raises(ValueError, match="unknown jmse option 'bogus'"):
+        jj.jmse_options(bogus=1)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_non_finite_under_jit_is_inf_not_nan(fig1, bad):
+    ab, field, u, signal, noise = fig1
+    fast = jmse_fn(preset="fast")
+    value = fast(jj.Seidel(**{**FIG1_COEFFICIENTS, "w131": bad}), field, u, signal, noise)
+    assert float(value) == math.inf
+    grad = jax.grad(lambda w: fast(jj.Seidel(**{**FIG1_COEFFICIENTS, "w131": w}), field, u,
+                                   signal, noise))(jnp.asarray(bad))
+    assert not np.isnan(float(grad))
+    assert float(fast(ab, jnp.asarray(bad), u, signal, noise)) == math.inf

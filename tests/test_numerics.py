@@ -1,0 +1,115 @@
+"""NaN-safe primitives: values and gradients at and around their singular points."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jmse_jax import _numerics as nm
+
+
+def _grad(fn, x):
+    return float(jax.grad(fn)(jnp.asarray(x, jnp.float64)))
+
+
+def test_safe_sqrt_values_and_gradients():
+    x = np.array([-2.0, -1e-300, 0.0, 1e-12, 0.25, 4.0])
+    np.testing.assert_allclose(nm.safe_sqrt(jnp.asarray(x)), np.sqrt(np.maximum(x, 0.0)),
+                               rtol=1e-15)
+    # Singular point and beyond: finite, documented one-sided value 0.
+    for point in (-1.0, 0.0):
+        assert _grad(nm.safe_sqrt, point) == 0.0
+    for point in (1e-12, 0.25, 4.0):
+        assert _grad(nm.safe_sqrt, point) == pytest.approx(0.5 / math.sqrt(point), rel=1e-14)
+
+
+def test_safe_norm_values_and_gradients():
+    x, y = 3.0, -4.0
+    assert float(nm.safe_norm(jnp.asarray(x), jnp.asarray(y))) == 5.0
+    gx, gy = jax.grad(nm.safe_norm, argnums=(0, 1))(jnp.asarray(x), jnp.asarray(y))
+    np.testing.assert_allclose([gx, gy], [0.6, -0.8], rtol=1e-15)
+    # At the origin the norm has a cone: the gradient returned is the finite value 0.
+    g0 = jax.grad(nm.safe_norm, argnums=(0, 1))(jnp.asarray(0.0), jnp.asarray(0.0))
+    assert [float(g) for g in g0] == [0.0, 0.0]
+    assert float(nm.safe_norm(jnp.asarray(0.0), jnp.asarray(0.0))) == 0.0
+
+
+def test_safe_arccos_values_and_gradients():
+    x = np.array([-1.5, -1.0, -0.3, 0.0, 0.7, 1.0, 2.0])
+    np.testing.assert_allclose(nm.safe_arccos(jnp.asarray(x)), np.arccos(np.clip(x, -1, 1)),
+                               rtol=1e-15, atol=1e-15)
+    for point in (-1.5, -1.0, 1.0, 2.0):  # singular (infinite) slope: finite 0 by design
+        g = _grad(nm.safe_arccos, point)
+        assert np.isfinite(g) and g == 0.0
+    for point in (-0.3, 0.0, 0.7, 0.999999):
+        assert _grad(nm.safe_arccos, point) == pytest.approx(
+            -1 / math.sqrt((1 - point) * (1 + point)), rel=1e-12)
+
+
+def test_abs2_values_and_gradients():
+    def f(re, im):
+        return nm.abs2(jax.lax.complex(re, im))
+
+    assert float(f(jnp.asarray(3.0), jnp.asarray(-4.0))) == 25.0
+    g = jax.grad(f, argnums=(0, 1))(jnp.asarray(3.0), jnp.asarray(-4.0))
+    np.testing.assert_allclose(g, [6.0, -8.0], rtol=1e-15)
+    g0 = jax.grad(f, argnums=(0, 1))(jnp.asarray(0.0), jnp.asarray(0.0))  # |z| is singular here
+    assert [float(v) for v in g0] == [0.0, 0.0]
+    # Real input works too.
+    assert _grad(nm.abs2, -2.0) == -4.0
+
+
+def test_gauss_legendre_exactness():
+    x, w = nm.gauss_legendre(5, 0.0, 2.0)
+    for degree in range(10):
+        assert np.sum(w * x**degree) == pytest.approx(2.0 ** (degree + 1) / (degree + 1),
+                                                      rel=1e-14)
+
+
+def test_barycentric_matrix_reproduces_polynomials():
+    source, _ = nm.gauss_legendre(8, 0.0, 1.0)
+    target = np.linspace(0.0, 1.0, 13)
+    matrix = nm.barycentric_matrix(source, target)
+    poly = np.polynomial.Polynomial([0.3, -1.0, 2.0, 0.5, -0.7, 1.1, 0.2, -0.9])
+    np.testing.assert_allclose(matrix @ poly(source), poly(target), atol=1e-13)
+    # A target on a source node is copied exactly.
+    exact = nm.barycentric_matrix(source, source[2:3])
+    np.testing.assert_array_equal(exact[0], np.eye(8)[2])
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: nm.check_range("u", 2.0, 0.0, 1.5, low_inclusive=False),
+         r"u must be in \(0\.0, 1\.5\], got 2\.0"),
+        (lambda: nm.check_range("u", float("nan"), 0.0, 1.5), r"u must be finite.*got nan"),
+        (lambda: nm.check_count("B", 0), r"B must be an integer >= 1, got 0"),
+        (lambda: nm.check_count("B", 2.0), r"B must be an integer >= 1, got 2\.0"),
+        (lambda: nm.check_choice("method", "x", ("a", "b")),
+         r"method must be one of 'a', 'b', got 'x'"),
+    ],
+)
+def test_checks_raise_with_name_value_and_range(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def test_checks_are_silent_under_tracing():
+    jax.jit(lambda v: nm.check_range("u", v, 0.0, 1.0) or v)(jnp.asarray(5.0))
+
+
+def test_cos_sin_2pi_values_and_derivative():
+    x = np.concatenate([np.linspace(-3.0, 3.0, 601), [0.25, 0.5, -0.75, 1e3 + 0.125, -57.3]])
+    reduced = x - np.round(x)  # exact: phases are in waves
+    c, s = nm.cos_sin_2pi(jnp.asarray(x))
+    np.testing.assert_allclose(c, np.cos(2 * np.pi * reduced), atol=3e-15)
+    np.testing.assert_allclose(s, np.sin(2 * np.pi * reduced), atol=3e-15)
+    dc, ds = jax.jvp(nm.cos_sin_2pi, (jnp.asarray(x),), (jnp.ones_like(jnp.asarray(x)),))[1]
+    np.testing.assert_allclose(dc, -2 * np.pi * np.sin(2 * np.pi * reduced), atol=2e-14)
+    np.testing.assert_allclose(ds, 2 * np.pi * np.cos(2 * np.pi * reduced), atol=2e-14)
+    g = jax.grad(lambda v: nm.cos_sin_2pi(v)[1])(jnp.asarray(0.5))  # at a rounding tie
+    assert float(g) == pytest.approx(-2 * np.pi, rel=1e-14)

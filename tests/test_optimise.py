@@ -1,0 +1,169 @@
+"""Lens optimisation: gradients vs finite differences, JMSE vs RMS optima, bounds, solvers."""
+
+import math
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import jmse_jax  # noqa: E402
+from jmse_jax import lens as jl  # noqa: E402
+from jmse_jax._optimise import lens_merit, optimise  # noqa: E402
+
+FAST = {"preset": "fast"}
+VARIABLES = ("curvatures[0]", "stop_position", "image_shift")
+
+
+def start_design(stop_distance=1.0, front_curvature=0.05, image_shift=0.0):
+    return jl.paper_singlet(stop_distance, front_curvature, image_shift=image_shift)
+
+
+@pytest.fixture(scope="module")
+def jmse_optimum():
+    return optimise(start_design(), VARIABLES, f_number=4.6, jmse_options=FAST)
+
+
+@pytest.fixture(scope="module")
+def rms_optimum():
+    return optimise(start_design(), VARIABLES, f_number=4.6, merit="rms", jmse_options=FAST)
+
+
+def test_objective_gradient_matches_finite_differences():
+    """d(mean JMSE)/d(lens parameters), polychromatic, F-number solve, vs central FD."""
+    wavelengths = (jl.FRAUNHOFER_F, jl.FRAUNHOFER_D)
+
+    def merit(params):
+        c1, stop, shift, thickness = params
+        lens = jl.Singlet(c1, 0.0, thickness, jl.N_BK7, stop_distance=-stop, ep_radius=0.978,
+                          field_angle=10.0, image_shift=shift)
+        lens = jl.solve_last_curvature(lens, 4.6)
+        return lens_merit(lens, fields=(0.3, 1.0), wavelengths=wavelengths,
+                          reference_scale=0.5875618 * 4.6, jmse_options=FAST)
+
+    params = jnp.array([0.04, -1.2, -0.15, 1.5])
+    value_and_grad = jax.jit(jax.value_and_grad(merit))  # one compilation serves both
+
+    def value(p):
+        return float(value_and_grad(p)[0])
+
+    grad = np.asarray(value_and_grad(params)[1])
+    for i, step in enumerate((1e-6, 1e-4, 1e-5, 1e-4)):
+        e = np.zeros(4)
+        e[i] = step
+        fd = (value(params + e) - value(params - e)) / (2 * step)
+        assert grad[i] == pytest.approx(fd, rel=1e-6), f"parameter {i}"
+    assert np.all(np.abs(grad) > 1e-8)  # every parameter matters
+
+
+def test_jmse_optimal_design_beats_rms_optimal_design(jmse_optimum, rms_optimum):
+    """The computational-imaging thesis: the JMSE optimum is not the RMS-wavefront optimum."""
+    assert jmse_optimum.result == "converged"
+    assert rms_optimum.result == "converged"
+    start_jmse = float(lens_merit(start_design(), jmse_options=FAST))
+    assert jmse_optimum.start_jmse == pytest.approx(start_jmse, rel=1e-12)
+    assert jmse_optimum.jmse < 0.9 * start_jmse
+    # Each design wins on its own merit, by a clear margin.
+    assert jmse_optimum.jmse < 0.8 * rms_optimum.jmse
+    assert rms_optimum.rms_wavefront < 0.9 * jmse_optimum.rms_wavefront
+    # And they are different lenses.
+    c_jmse = jmse_optimum.parameters["curvatures[0]"]
+    c_rms = rms_optimum.parameters["curvatures[0]"]
+    assert abs(c_jmse - c_rms) > 1e-3
+    assert float(jl.working_f_number(jmse_optimum.lens)) == pytest.approx(4.6, rel=1e-12)
+    summary = jmse_optimum.summary()
+    assert "JMSE" in summary and "iterations" in summary
+
+
+def test_different_starts_reach_the_same_jmse(jmse_optimum):
+    other = optimise(start_design(2.5, -0.02, -0.1), VARIABLES, f_number=4.6,
+                     jmse_options=FAST)
+    assert other.result == "converged"
+    assert other.jmse == pytest.approx(jmse_optimum.jmse, rel=1e-3)
+
+
+def test_second_solver_reaches_the_bfgs_optimum(rms_optimum):
+    cg = optimise(start_design(), VARIABLES, f_number=4.6, merit="rms", solver="nonlinear_cg",
+                  jmse_options=FAST)
+    assert cg.solver == "NonlinearCG"
+    assert cg.rms_wavefront == pytest.approx(rms_optimum.rms_wavefront, rel=1e-6)
+
+
+def test_bounds_use_lbfgsb_and_find_the_constrained_optimum(rms_optimum):
+    # The unconstrained RMS optimum has the stop ~2.4 mm in front; allow at most 1 mm.
+    assert rms_optimum.parameters["stop_position"] < -1.5
+    bounded = optimise(start_design(), VARIABLES, f_number=4.6, merit="rms",
+                       bounds={"stop_position": (-1.0, 0.0), "curvatures[0]": (-0.1, 0.1)},
+                       jmse_options=FAST)
+    assert bounded.solver == "jaxopt.LBFGSB"
+    assert bounded.parameters["stop_position"] == pytest.approx(-1.0, abs=1e-9)
+    # Same constrained optimum as optimistix with the stop pinned at the bound.
+    pinned = optimise(start_design(stop_distance=1.0), ("curvatures[0]", "image_shift"),
+                      f_number=4.6, merit="rms", jmse_options=FAST)
+    assert bounded.rms_wavefront == pytest.approx(pinned.rms_wavefront, rel=1e-5)
+    assert bounded.rms_wavefront > rms_optimum.rms_wavefront
+
+
+def test_polychromatic_merit_rescales_band_and_spectra():
+    """Constant index: at lambda the merit is the JMSE with u s, mu / s, S_n / s² (s = l/l0)."""
+    lens = jl.Singlet(0.04, -0.17, 1.5, 1.5168, stop_distance=1.0, f_number=4.6,
+                      field_angle=10.0, image_shift=-0.1)
+    wl = 0.65
+    s = wl / float(lens.wavelength)
+    got = float(lens_merit(lens, fields=(0.7,), wavelengths=(wl,), jmse_options=FAST))
+    jmse = jax.jit(lambda *args: jmse_jax.jmse(*args, preset="fast"))
+    expected = float(jmse(jl.seidel_waves(lens, wl), 0.7, 0.2 * s,
+                          jmse_jax.MarkovSignal(1.0, 5.0 / s), jmse_jax.WhiteNoise(1e-3 / s**2)))
+    assert got == pytest.approx(expected, rel=1e-12)
+    mono = float(lens_merit(lens, fields=(0.7,), jmse_options=FAST))
+    same = float(lens_merit(lens, fields=(0.7,), wavelengths=(float(lens.wavelength),),
+                            jmse_options=FAST))
+    assert same == pytest.approx(mono, rel=1e-12)
+    assert abs(got - mono) > 1e-3 * mono
+
+
+def test_rms_merit_is_the_closed_form():
+    lens = start_design()
+    ab = jl.seidel_waves(lens)
+    fields = (0.0, 0.7, 1.0)
+    expected = np.mean([float(jl.rms_wavefront_error(ab, h)) ** 2 for h in fields])
+    assert float(lens_merit(lens, merit="rms")) == pytest.approx(expected, rel=1e-14)
+
+
+def test_non_physical_design_gives_inf_merit_and_finite_gradient():
+    @jax.jit
+    def merit(thickness):
+        lens = jl.Lens([0.2, -0.2], jnp.reshape(thickness, (1,)), [1.5, 1.0], ep_radius=1.5,
+                       field_angle=5.0)
+        return lens_merit(lens, merit="rms")
+
+    assert math.isinf(float(merit(jnp.asarray(0.3))))  # negative edge thickness
+    assert np.isfinite(float(merit(jnp.asarray(1.0))))
+    grad = jax.grad(merit)(jnp.asarray(0.3))
+    assert float(grad) == 0.0
+    bad = jl.Lens([0.2, -0.2], [0.3], [1.5, 1.0], ep_radius=1.5, field_angle=5.0)
+    with pytest.raises(ValueError, match="edge thickness"):
+        lens_merit(bad, merit="rms")
+
+
+def test_optimise_argument_errors():
+    lens = start_design()
+    with pytest.raises(ValueError, match="does not name a lens parameter"):
+        optimise(lens, ("curvature[0]",))
+    with pytest.raises(ValueError, match="out of range"):
+        optimise(lens, ("curvatures[5]",))
+    with pytest.raises(ValueError, match="fixed by the f_number solve"):
+        optimise(lens, ("curvatures[1]",), f_number=4.6)
+    with pytest.raises(ValueError, match="bounds names"):
+        optimise(lens, ("curvatures[0]",), merit="rms", bounds={"image_shift": (-1, 1)})
+    with pytest.raises(ValueError, match="low < high"):
+        optimise(lens, ("image_shift",), merit="rms", bounds={"image_shift": (1, -1)})
+    with pytest.raises(ValueError, match="merit must be one of"):
+        optimise(lens, ("image_shift",), merit="strehl")
+    with pytest.raises(ValueError, match="solver must be one of"):
+        optimise(lens, ("image_shift",), merit="rms", solver="newton")
+    with pytest.raises(ValueError, match=r"fields must be in \[0.0, 1.0\]"):
+        lens_merit(lens, merit="rms", fields=(0.5, 1.5))

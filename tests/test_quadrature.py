@@ -1,0 +1,134 @@
+"""Frequency quadratures over the sensor band [-u, u]²: exactness and order of convergence."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import numpy as np
+import oracles
+import pytest
+from scipy import integrate
+
+from jmse_jax._quadrature import frequency_quadrature
+
+RULES = ("polar", "gauss", "gauss_polar", "trapezoid", "rectangle")
+
+
+def _markov(x, y):
+    return oracles.markov_psd(np.hypot(x, y), 1.0, 5.0)
+
+
+def _dl_otf2_plus_markov(x, y):
+    """A band integrand with the OTF's cutoff edge and S_x's cone-like peak at 0."""
+    return oracles.diffraction_limited_otf(np.hypot(x, y)) ** 2 + _markov(x, y)
+
+
+def _rule_integral(rule, u, p, f):
+    nu_x, nu_y, w = (np.asarray(a) for a in frequency_quadrature(rule, u, p))
+    return float(np.sum(w * f(nu_x, nu_y)))
+
+
+@pytest.fixture(scope="module")
+def markov_reference():
+    return {u: oracles.square_integral(_markov, u) for u in (0.2, 0.5)}
+
+
+@pytest.mark.parametrize("rule", RULES)
+@pytest.mark.parametrize("u", [0.2, 1.5])
+def test_nodes_in_first_quadrant_with_positive_weights(rule, u):
+    p = (6, 5) if rule == "polar" else 6
+    nu_x, nu_y, w = (np.asarray(a) for a in frequency_quadrature(rule, u, p))
+    assert nu_x.shape == nu_y.shape == w.shape
+    assert np.all(nu_x >= 0) and np.all(nu_y >= 0)
+    assert np.all(nu_x <= u * (1 + 1e-14)) and np.all(nu_y <= u * (1 + 1e-14))
+    assert np.all(w >= 0)
+
+
+@pytest.mark.parametrize("u", [0.1, 0.2, 0.9, 1.5])
+def test_constant_gives_band_area(u):
+    area = 4 * u * u
+    one = lambda x, y: np.ones_like(x)  # noqa: E731
+    assert _rule_integral("gauss", u, 3, one) == pytest.approx(area, rel=1e-14)
+    assert _rule_integral("trapezoid", u, 2, one) == pytest.approx(area, rel=1e-14)
+    assert _rule_integral("polar", u, (16, 16), one) == pytest.approx(area, rel=1e-13)
+    # Rectangle rule on the lag grid k u / p, k = 0..p-1 (half cell at 0): first order.
+    p = 10
+    assert _rule_integral("rectangle", u, p, one) == pytest.approx(area * (1 - 0.5 / p) ** 2,
+                                                                    rel=1e-14)
+
+
+def test_gauss_exact_for_even_polynomials():
+    u = 0.37
+
+    def f(x, y):
+        return 1 + 3 * x**2 + x**2 * y**4 - 2 * y**6
+
+    exact = 4 * u**2 + 3 * (2 * u**3 / 3) * 2 * u + (2 * u**3 / 3) * (2 * u**5 / 5) \
+        - 2 * (2 * u**7 / 7) * 2 * u
+    assert _rule_integral("gauss", u, 4, f) == pytest.approx(exact, rel=1e-14)
+    assert _rule_integral("polar", u, (24, 24), f) == pytest.approx(exact, rel=1e-12)
+    assert oracles.square_integral(f, u) == pytest.approx(exact, rel=1e-12)  # the oracle too
+
+
+@pytest.mark.parametrize("u", [0.2, 0.5])
+@pytest.mark.parametrize("rule", ["gauss", "polar"])
+def test_spectral_convergence_on_markov_spectrum(markov_reference, rule, u):
+    reference = markov_reference[u]
+    # p = 48: the polar rule's rays are composite (three radial panels, see _quadrature),
+    # so it needs a few more nodes than a single panel on this smooth integrand.
+    errors = [abs(_rule_integral(rule, u, p, _markov) - reference) / reference
+              for p in (8, 16, 48)]
+    assert errors[2] < 1e-8
+    assert errors[2] < 1e-4 * errors[0]  # faster than any fixed power of 1/p
+
+
+@pytest.mark.parametrize(("rule", "p_coarse", "order"),
+                         [("trapezoid", 17, 2), ("gauss_polar", 17, 2), ("rectangle", 16, 1)])
+def test_algebraic_order(markov_reference, rule, p_coarse, order):
+    u = 0.2
+    reference = markov_reference[u]
+    coarse = abs(_rule_integral(rule, u, p_coarse, _markov) - reference)
+    fine = abs(_rule_integral(rule, u, 2 * p_coarse - (p_coarse % 2), _markov) - reference)
+    ratio = coarse / fine
+    assert 2**order * 0.8 < ratio < 2**order * 1.25, ratio
+
+
+@pytest.mark.parametrize("u", [0.9, 1.2, 1.5])
+def test_polar_past_the_cutoff(u):
+    """Corners of the band past |nu| = 1: rays split at the cutoff, still convergent."""
+    if u >= 1:  # the whole disc lies in the band: its part reduces to a radial integral
+        disc, _ = integrate.quad(lambda r: oracles.diffraction_limited_otf(r) ** 2 * r, 0, 1,
+                                 epsabs=1e-15, epsrel=1e-14)
+        reference = 2 * math.pi * disc + oracles.square_integral(_markov, u)
+    else:
+        reference = oracles.square_integral(_dl_otf2_plus_markov, u)
+    errors = [abs(_rule_integral("polar", u, (p, p), _dl_otf2_plus_markov) - reference)
+              / reference for p in (16, 32)]
+    # The edge of H0**2 at |nu| = 1 ((1 - r)**3) converges algebraically; the composite
+    # radial rule leaves 40 % of the nodes to the outer panel (8e-6 at p = 32).
+    assert errors[1] < 1e-5
+    assert errors[1] < errors[0] / 10
+
+
+def test_weights_are_differentiable_in_u():
+    for rule in ("gauss", "polar"):
+        p = (12, 12) if rule == "polar" else 5
+        area = jax.grad(lambda u, rule=rule, p=p: frequency_quadrature(rule, u, p)[2].sum())
+        assert float(area(0.3)) == pytest.approx(8 * 0.3, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("rule", "p", "match"),
+    [
+        ("bogus", 4, r"quadrature must be one of 'polar', .*, got 'bogus'"),
+        ("gauss", 0, r"p must be an integer >= 1, got 0"),
+        ("rectangle", -2, r"p must be an integer >= 1, got -2"),
+        ("polar", (0, 4), r"nodes \(radial\) must be an integer >= 1, got 0"),
+        ("polar", (4, 0), r"nodes \(angular\) must be an integer >= 1, got 0"),
+        ("trapezoid", 1, r"p must be >= 2 for the trapezoid rule, got 1"),
+    ],
+)
+def test_bad_rule_or_count_raises(rule, p, match):
+    with pytest.raises(ValueError, match=match):
+        frequency_quadrature(rule, 0.2, p)
