@@ -273,8 +273,10 @@ def _parse(path: str, lens: Lens):
                                      f"[0, {size - 1}]")
                 trailing = index
                 node = node[index]
-    if not (hasattr(node, "dtype") and jnp.issubdtype(node.dtype, jnp.floating)
-            and np.ndim(node) == 0):
+    is_float = isinstance(node, float) or (
+        hasattr(node, "dtype") and jnp.issubdtype(node.dtype, jnp.floating)
+    )
+    if not (is_float and np.ndim(node) == 0):
         raise ValueError(f"variable {path!r} must name a scalar float parameter of the lens")
     return tuple(tokens), trailing
 
@@ -301,7 +303,7 @@ def _set(lens, parsed, value):
     tokens, trailing = parsed
     where = _node_getter(tokens)
     if trailing is None:
-        return eqx.tree_at(where, lens, jnp.asarray(value, where(lens).dtype))
+        return eqx.tree_at(where, lens, jnp.asarray(value, lens.ep_radius.dtype))
     return eqx.tree_at(where, lens, where(lens).at[trailing].set(value))
 
 

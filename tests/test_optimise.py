@@ -149,6 +149,16 @@ def test_non_physical_design_gives_inf_merit_and_finite_gradient():
         lens_merit(bad, merit="rms")
 
 
+def test_glass_parameters_are_optimisation_variables():
+    start = start_design()
+    result = optimise(start, ("media[0].nd", "image_shift"), f_number=4.6, merit="rms",
+                      scales={"media[0].nd": 0.01}, max_steps=50, jmse_options=FAST)
+    assert set(result.parameters) == {"media[0].nd", "image_shift"}
+    assert result.parameters["media[0].nd"] != pytest.approx(1.5168, abs=1e-4)
+    assert float(result.lens.media[0].nd) == result.parameters["media[0].nd"]
+    assert result.rms_wavefront < result.start_rms_wavefront
+
+
 def test_optimise_argument_errors():
     lens = start_design()
     with pytest.raises(ValueError, match="does not name a lens parameter"):
