@@ -69,6 +69,10 @@ _RADIAL_EDGES = (0.0, 0.15, 0.4, 1.0)
 _RADIAL_SHARES = (0.3, 0.3, 0.4)
 
 
+def _radial_panels() -> list[tuple[float, float]]:
+    return list(zip(_RADIAL_EDGES[:-1], _RADIAL_EDGES[1:], strict=True))
+
+
 def _radial_counts(n: int) -> tuple[int, ...]:
     """Nodes per radial panel for ``n`` in total (each panel gets at least one)."""
     counts = [max(1, round(n * share)) for share in _RADIAL_SHARES[:-1]]
@@ -84,7 +88,7 @@ def _radial_rule(n: int):
     from spoiling the polynomial interpolation over the rest of the ray.
     """
     nodes, weights = [], []
-    for (a, b), k in zip(zip(_RADIAL_EDGES[:-1], _RADIAL_EDGES[1:]), _radial_counts(n)):
+    for (a, b), k in zip(_radial_panels(), _radial_counts(n), strict=True):
         x, w = gauss_legendre(k, a, b)
         nodes.append(x)
         weights.append(w)
@@ -96,7 +100,7 @@ def _radial_interpolation(n_coarse: int, n_fine: int) -> np.ndarray:
     coarse, fine = _radial_counts(n_coarse), _radial_counts(n_fine)
     matrix = np.zeros((n_fine, n_coarse))
     r0 = c0 = 0
-    for (a, b), kc, kf in zip(zip(_RADIAL_EDGES[:-1], _RADIAL_EDGES[1:]), coarse, fine):
+    for (a, b), kc, kf in zip(_radial_panels(), coarse, fine, strict=True):
         xc, _ = gauss_legendre(kc, a, b)
         xf, _ = gauss_legendre(kf, a, b)
         matrix[r0:r0 + kf, c0:c0 + kc] = barycentric_matrix(xc, xf)

@@ -1,19 +1,40 @@
-"""The ``jmse-jax`` console script.
+"""The ``jmse-jax`` console script: ``eval``, ``optimise``, ``sweep``, ``bench``, ``reproduce``.
 
-Float64 is switched on here (the library itself never does so at import).
+Units: Seidel coefficients in waves; frequencies in units of the optical cutoff 1/(lambda N);
+``u`` = sensor Nyquist / optical cutoff = lambda N / (2 pixel pitch); field as a fraction of
+the full field in [0, 1]; lens quantities in mm (curvatures in 1/mm). Float64 is switched on
+here (the library itself never does so at import). Bad arguments give a one-line
+``jmse-jax: error: ...`` and exit status 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
+import pathlib
+import subprocess
 import sys
 import time
 
-FIG1 = dict(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198)
-FIG1_FIELD = 0.95
-FIG1_U = 0.2
+from ._reproduce import FIG1, FIG1_FIELD, FIG1_U
+
+COEFFICIENTS = ("w020", "w040", "w131", "w222", "w220", "w311", "w111")
+COEFFICIENT_NAMES = {"w020": "defocus", "w040": "spherical", "w131": "coma",
+                     "w222": "astigmatism", "w220": "field curvature", "w311": "distortion",
+                     "w111": "tilt"}
+PRESET_NAMES = ("fast", "default", "high")
+EVAL_KEYS = COEFFICIENTS + ("field", "u", "noise", "signal", "preset", "nu")
+EVAL_DEFAULTS = dict(field=FIG1_FIELD, u=FIG1_U, noise=1e-3, signal="markov:1,5",
+                     preset="default", nu="0.05,0.1,0.2")
+UNITS = ("Units: Seidel coefficients in waves; spatial frequencies nu in units of the optical "
+         "cutoff 1/(lambda N); u = sensor Nyquist / optical cutoff = lambda N / (2 pixel pitch) "
+         "in (0, 1.5]; field = fractional field height in [0, 1]; signal and noise spectra in "
+         "the same normalised frequency units.")
+SIGNAL_HELP = ("signal spectrum S_x: 'markov:VARIANCE,MU' (exponentially correlated, "
+               "correlation length MU in units of lambda N), 'powerlaw:A,GAMMA,NU0' "
+               "(A / (NU0^2 + |nu|^2)^(GAMMA/2), NU0 in cutoff units) or 'white:LEVEL'")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -21,6 +42,56 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(2, f"jmse-jax: error: {message}\n")
+
+
+class UsageError(ValueError):
+    """A bad value on the command line (reported in one line, exit status 2)."""
+
+
+# --------------------------------------------------------------------------------------
+# Parsing helpers (ValueError with a sentence a user can act on)
+# --------------------------------------------------------------------------------------
+
+
+def _floats(text: str, name: str) -> list[float]:
+    try:
+        values = [float(v) for v in str(text).split(",") if v.strip()]
+    except ValueError:
+        raise UsageError(f"{name} must be comma-separated numbers, got {text!r}") from None
+    if not values or not all(math.isfinite(v) for v in values):
+        raise UsageError(f"{name} must be finite numbers, got {text!r}")
+    return values
+
+
+def parse_signal(text: str):
+    """``markov:VAR,MU`` / ``powerlaw:A,GAMMA,NU0`` / ``white:LEVEL`` -> signal model."""
+    import jmse_jax as jj
+
+    kind, _, rest = str(text).partition(":")
+    kind = kind.strip().lower()
+    forms = {"markov": 2, "powerlaw": 3, "white": 1}
+    if kind not in forms or not rest:
+        raise UsageError(f"--signal must be markov:VAR,MU, powerlaw:A,GAMMA,NU0 or white:LEVEL, "
+                         f"got {text!r}")
+    values = _floats(rest, "--signal")
+    if len(values) != forms[kind]:
+        raise UsageError(f"--signal {kind} takes {forms[kind]} numbers, got {text!r}")
+    if any(v <= 0 for v in values[:1]) or (kind == "markov" and values[1] <= 0):
+        raise UsageError(f"--signal parameters must be positive, got {text!r}")
+    if kind == "markov":
+        return jj.MarkovSignal(values[0], values[1])
+    if kind == "powerlaw":
+        if values[2] <= 0:
+            raise UsageError(f"--signal powerlaw knee NU0 must be positive, got {text!r}")
+        return jj.PowerLawSignal(values[0], values[1], values[2])
+    return jj.WhiteSignal(values[0])
+
+
+def _positive(name, value) -> float:
+    value = float(value)
+    if not (math.isfinite(value) and value > 0):
+        raise UsageError(f"{name} must be a positive number, got {value!r}")
+    return value
 
 
 def _timed(fn, *args, repeats=5):
@@ -33,59 +104,405 @@ def _timed(fn, *args, repeats=5):
     return result, (time.perf_counter() - start) / repeats
 
 
-def _fig1_comparison(out_dir: str | None) -> dict:
+def _write_json(path, data):
+    directory = os.path.dirname(os.path.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    with open(path, "w") as f:
+        json.dump(data, f, indent=2)
+    print(f"wrote {path}")
+
+
+# --------------------------------------------------------------------------------------
+# eval
+# --------------------------------------------------------------------------------------
+
+
+def eval_inputs(args) -> dict:
+    """Merge defaults <- ``--json`` file <- explicit flags; return the validated settings."""
+    settings = dict(EVAL_DEFAULTS, **{k: 0.0 for k in COEFFICIENTS})
+    if args.preset_point == "fig1":
+        settings.update(FIG1)
+    if args.json:
+        try:
+            with open(args.json) as f:
+                data = json.load(f)
+        except OSError as e:
+            raise UsageError(f"cannot read --json {args.json}: {e.strerror}") from None
+        except json.JSONDecodeError as e:
+            raise UsageError(f"--json {args.json} is not valid JSON ({e.msg}, line {e.lineno})"
+                             ) from None
+        if not isinstance(data, dict):
+            raise UsageError(f"--json {args.json} must hold an object with keys such as w020")
+        unknown = sorted(set(data) - set(EVAL_KEYS))
+        if unknown:
+            raise UsageError(f"--json {args.json}: unknown keys {unknown}; allowed: "
+                             f"{', '.join(EVAL_KEYS)}")
+        settings.update(data)
+    for key in EVAL_KEYS:
+        value = getattr(args, key, None)
+        if value is not None:
+            settings[key] = value
+    for key in COEFFICIENTS + ("field", "u", "noise"):
+        try:
+            settings[key] = float(settings[key])
+        except (TypeError, ValueError):
+            raise UsageError(f"{key} must be a number, got {settings[key]!r}") from None
+        if not math.isfinite(settings[key]):
+            raise UsageError(f"{key} must be finite, got {settings[key]!r}")
+    if settings["preset"] not in PRESET_NAMES:
+        raise UsageError(f"preset must be one of {', '.join(PRESET_NAMES)}, "
+                         f"got {settings['preset']!r}")
+    _positive("noise", settings["noise"])
+    nu = settings["nu"]
+    settings["nu"] = (_floats(nu, "nu") if isinstance(nu, str)
+                      else [float(v) for v in (nu if isinstance(nu, list) else [nu])])
+    if not all(0.0 <= v for v in settings["nu"]):
+        raise UsageError(f"nu must be >= 0 (cutoff units), got {settings['nu']}")
+    return settings
+
+
+def evaluate(settings: dict) -> dict:
+    """JMSE, its gradient w.r.t. the Seidel coefficients, and the OTF for ``settings``."""
+    import jax
+    import numpy as np
+
+    import jmse_jax as jj
+
+    ab = jj.Seidel(**{k: settings[k] for k in COEFFICIENTS})
+    signal, noise = parse_signal(settings["signal"]), jj.WhiteNoise(settings["noise"])
+    field, u, preset = settings["field"], settings["u"], settings["preset"]
+    value, grad = jax.value_and_grad(jj.jmse)(ab, field, u, signal, noise, preset=preset)
+    nu = np.asarray(settings["nu"], dtype=float)
+    zeros = np.zeros_like(nu)
+    h_x = np.asarray(jj.otf(ab, nu, zeros, field))
+    h_y = np.asarray(jj.otf(ab, zeros, nu, field))
+    return dict(
+        inputs={k: settings[k] for k in COEFFICIENTS + ("field", "u", "noise", "signal",
+                                                          "preset")},
+        jmse=float(value),
+        gradient={k: float(getattr(grad, k)) for k in COEFFICIENTS},
+        otf=[dict(nu=float(n), nu_x=dict(re=float(a.real), im=float(a.imag), mtf=float(abs(a))),
+                  nu_y=dict(re=float(b.real), im=float(b.imag), mtf=float(abs(b))))
+             for n, a, b in zip(nu, h_x, h_y, strict=True)],
+    )
+
+
+def _cmd_eval(args) -> int:
+    settings = eval_inputs(args)
+    result = evaluate(settings)
+    inp = result["inputs"]
+    print(f"JMSE (Wiener-restoration MSE), preset {inp['preset']}: field {inp['field']:g}, "
+          f"u = {inp['u']:g} (Nyquist/cutoff), signal {inp['signal']}, "
+          f"noise {inp['noise']:g}")
+    print(f"{'coefficient':<26}{'value [waves]':>15}{'dJMSE/dw [1/wave]':>20}")
+    for k in COEFFICIENTS:
+        print(f"{k + ' (' + COEFFICIENT_NAMES[k] + ')':<26}{inp[k]:>15.6g}"
+              f"{result['gradient'][k]:>20.6e}")
+    print(f"JMSE = {result['jmse']:.10e}")
+    print("OTF H (nu in cutoff units 1/(lambda N)):")
+    print(f"{'nu':>8}{'H(nu, 0)':>28}{'|H(nu,0)|':>12}{'H(0, nu)':>28}{'|H(0,nu)|':>12}")
+    for row in result["otf"]:
+        a, b = row["nu_x"], row["nu_y"]
+        print(f"{row['nu']:>8.4g}{a['re']:>+14.6e}{a['im']:>+13.6e}i{a['mtf']:>12.6f}"
+              f"{b['re']:>+14.6e}{b['im']:>+13.6e}i{b['mtf']:>12.6f}")
+    if args.out_json:
+        _write_json(args.out_json, result)
+    return 0
+
+
+# --------------------------------------------------------------------------------------
+# optimise
+# --------------------------------------------------------------------------------------
+
+LENS_VARIABLES = ("curvatures[0]", "stop_position", "image_shift")
+
+
+def _cmd_optimise(args) -> int:
+    import jmse_jax as jj
+    from jmse_jax import lens as jl
+
+    lo, hi = jl.PAPER_SINGLET["front_curvature_range"]
+    if not lo <= args.front_curvature <= hi:
+        raise UsageError(f"--front-curvature must be in [{lo}, {hi}] 1/mm, "
+                         f"got {args.front_curvature}")
+    lo, hi = jl.PAPER_SINGLET["stop_distance_range"]
+    if not lo <= args.stop_distance <= hi:
+        raise UsageError(f"--stop-distance must be in [{lo}, {hi}] mm, got {args.stop_distance}")
+    if args.max_steps < 1:
+        raise UsageError(f"--max-steps must be a positive integer, got {args.max_steps}")
+    signal = parse_signal(args.signal)
+    noise = jj.WhiteNoise(_positive("--noise", args.noise))
+    start = jl.paper_singlet(args.stop_distance, args.front_curvature,
+                             image_shift=args.image_shift)
+    print(f"paper singlet (F/{jl.PAPER_SINGLET['f_number']}, f = "
+          f"{jl.PAPER_SINGLET['focal_length']} mm, {jl.PAPER_SINGLET['field_angle']} deg): "
+          f"start stop {args.stop_distance} mm, front curvature {args.front_curvature} 1/mm, "
+          f"image shift {args.image_shift} mm; merit {args.merit}, preset {args.preset}, "
+          f"u = {args.u}; optimising {', '.join(args.variables)} ...", flush=True)
+    result = jj.optimise(start, tuple(args.variables), merit=args.merit, u=args.u,
+                         signal=signal, noise=noise, f_number=jl.PAPER_SINGLET["f_number"],
+                         max_steps=args.max_steps, jmse_options={"preset": args.preset})
+    print(result.summary())
+    if args.out_json:
+        _write_json(args.out_json, dict(
+            start=dict(stop_distance_mm=args.stop_distance,
+                       front_curvature_per_mm=args.front_curvature,
+                       image_shift_mm=args.image_shift),
+            merit=result.merit, preset=args.preset, u=args.u, signal=args.signal,
+            noise=args.noise, parameters=result.parameters, value=result.value,
+            jmse=result.jmse, jmse_per_field=list(result.jmse_per_field),
+            fields=list(result.fields), rms_wavefront_waves=result.rms_wavefront,
+            start_jmse=result.start_jmse, start_rms_wavefront_waves=result.start_rms_wavefront,
+            curvatures_per_mm=[float(c) for c in result.lens.curvatures],
+            iterations=result.iterations, wall_time_s=result.wall_time, result=result.result,
+            solver=result.solver))
+    return 0
+
+
+# --------------------------------------------------------------------------------------
+# sweep
+# --------------------------------------------------------------------------------------
+
+SWEEP_AXES = COEFFICIENTS + ("field", "u")
+
+
+def parse_axis(text: str) -> tuple[str, list[float]]:
+    """``NAME=MIN,MAX,N`` -> (name, N equally spaced values)."""
+    name, sep, rest = str(text).partition("=")
+    name = name.strip()
+    if not sep or name not in SWEEP_AXES:
+        raise UsageError(f"--axis must be NAME=MIN,MAX,N with NAME one of "
+                         f"{', '.join(SWEEP_AXES)}, got {text!r}")
+    values = _floats(rest, f"--axis {name}")
+    if len(values) != 3 or values[2] != int(values[2]) or values[2] < 1:
+        raise UsageError(f"--axis {name} needs MIN,MAX,N with N a positive integer, "
+                         f"got {rest!r}")
+    import numpy as np
+
+    return name, np.linspace(values[0], values[1], int(values[2])).tolist()
+
+
+def _cmd_sweep(args) -> int:
+    import numpy as np
+
+    import jmse_jax as jj
+
+    axes = dict(parse_axis(a) for a in (args.axis or ["w020=-3,3,5", "w222=-1.5,1.5,3"]))
+    n = int(np.prod([len(v) for v in axes.values()]))
+    if n > args.max_designs:
+        raise UsageError(f"the grid has {n} designs, more than --max-designs "
+                         f"{args.max_designs}; lower N or raise --max-designs")
+    if args.batch_size < 1:
+        raise UsageError(f"--batch-size must be a positive integer, got {args.batch_size}")
+    cube = jj.hypercube(**axes)
+    fixed = {k: getattr(args, k) for k in COEFFICIENTS}
+    ab = jj.Seidel(**{k: cube.get(k, fixed[k]) for k in COEFFICIENTS})
+    field = cube.get("field", args.field)
+    u = cube.get("u", args.u)
+    signal = parse_signal(args.signal)
+    noise = jj.WhiteNoise(_positive("--noise", args.noise))
+    print(f"sweep of {n} designs over {', '.join(f'{k} ({len(v)})' for k, v in axes.items())}; "
+          f"preset {args.preset}, grad {args.grad}", flush=True)
+    result = jj.sweep_jmse(ab, field, u, signal, noise, grad=args.grad, preset=args.preset,
+                           batch_size=args.batch_size, progress=not args.quiet,
+                           metadata=dict(axes=axes, fixed=fixed, signal=args.signal,
+                                         noise=args.noise, command="jmse-jax sweep"))
+    path = result.save(os.path.join(args.out, "sweep.npz"))
+    values = np.asarray(result.value)
+    ok = result.ok
+    print(f"status: {result.status_counts()}")
+    if ok.any():
+        best = int(np.argmin(np.where(ok, values, np.inf)))
+        design = ", ".join(f"{k} = {cube[k][best]:g}" for k in axes)
+        print(f"JMSE min {values[ok].min():.6e}, max {values[ok].max():.6e}; best: {design}")
+    summary = dict(n_designs=n, axes=axes, status_counts=result.status_counts(),
+                   jmse=values.tolist(), npz=str(path),
+                   seconds=result.metadata.get("wall_time_s"))
+    _write_json(os.path.join(args.out, "sweep_summary.json"), summary)
+    print(f"wrote {path} and {path.with_suffix('.json')}")
+    return 0
+
+
+# --------------------------------------------------------------------------------------
+# bench
+# --------------------------------------------------------------------------------------
+
+
+def benchmarks_folder() -> pathlib.Path:
+    """``benchmarks/`` next to the package (present in a repository checkout)."""
+    return pathlib.Path(__file__).resolve().parent.parent / "benchmarks"
+
+
+def builtin_bench(repeats: int = 5) -> dict:
+    """Warm time of ``jmse`` (each preset given) vs ``baseline_jmse`` B = 64, Fig. 1 point."""
     import jax
 
     import jmse_jax as jj
 
     ab = jj.Seidel(**FIG1)
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
-
-    def merit(a):
-        return jj.jmse(a, FIG1_FIELD, FIG1_U, signal, noise)
-
-    def baseline(a):
-        return jj.baseline_jmse(a, FIG1_FIELD, FIG1_U, signal, noise, B=64)
-
     rows = {}
-    for name, fn in (("baseline B=64", baseline), ("jmse default", merit)):
-        (value, _), t_vg = _timed(jax.jit(jax.value_and_grad(fn)), ab)
-        _, t_v = _timed(jax.jit(fn), ab)
+    cases = [("baseline B=64", lambda a: jj.baseline_jmse(a, FIG1_FIELD, FIG1_U, signal, noise,
+                                                           B=64))]
+    cases.append(("jmse fast", lambda a: jj.jmse(a, FIG1_FIELD, FIG1_U, signal, noise,
+                                                 preset="fast")))
+    print(f"{'method':<16}{'JMSE':>14}{'value':>12}{'value+grad':>13}", flush=True)
+    for name, fn in cases:
+        value, t_v = _timed(jax.jit(fn), ab, repeats=repeats)
+        _, t_vg = _timed(jax.jit(jax.value_and_grad(fn)), ab, repeats=repeats)
         rows[name] = dict(jmse=float(value), time_value_s=t_v, time_value_and_grad_s=t_vg)
-    reference = 2.6539432e-3  # SPEC §5, converged float64 value
-    print("Fig. 1 operating point of Berkner & Shroff (field 0.95, u = 0.2,"
-          " MarkovSignal(1, 5), WhiteNoise(1e-3)); float64")
-    print(f"{'method':<16}{'JMSE':>14}{'rel. err':>11}{'value':>11}{'value+grad':>13}")
-    for name, row in rows.items():
-        row["relative_error"] = row["jmse"] / reference - 1.0
-        print(f"{name:<16}{row['jmse']:>14.7e}{row['relative_error']:>+11.2e}"
-              f"{row['time_value_s'] * 1e3:>9.2f}ms{row['time_value_and_grad_s'] * 1e3:>11.2f}ms")
-    base, ours = rows["baseline B=64"]["jmse"], rows["jmse default"]["jmse"]
-    print(f"baseline vs default: {base / ours - 1.0:+.2%}")
-    result = dict(reference=reference, methods=rows, device=str(jax.devices()[0]))
-    if out_dir:
-        os.makedirs(out_dir, exist_ok=True)
-        with open(os.path.join(out_dir, "fig1_comparison.json"), "w") as f:
-            json.dump(result, f, indent=2)
-        print(f"wrote {os.path.join(out_dir, 'fig1_comparison.json')}")
-    return result
+        print(f"{name:<16}{float(value):>14.7e}{t_v * 1e3:>10.2f}ms{t_vg * 1e3:>11.2f}ms",
+              flush=True)
+    return dict(methods=rows, repeats=repeats, device=str(jax.devices()[0]))
+
+
+def _cmd_bench(args) -> int:
+    if args.builtin:
+        result = builtin_bench(args.repeats)
+        if args.out_json:
+            _write_json(args.out_json, result)
+        return 0
+    folder = benchmarks_folder()
+    script = folder / "run_all.py"
+    if not script.is_file():
+        raise UsageError(f"no benchmarks/run_all.py next to the package ({folder}): it ships "
+                         "with the repository only; use 'jmse-jax bench --builtin'")
+    command = [sys.executable, str(script)] + ([] if args.full else ["--quick"])
+    print(f"running {' '.join(command)} (outputs in {folder / 'results'})", flush=True)
+    return subprocess.call(command, cwd=folder.parent)
+
+
+# --------------------------------------------------------------------------------------
+# reproduce
+# --------------------------------------------------------------------------------------
 
 
 def _cmd_reproduce(args) -> int:
-    _fig1_comparison(args.out)
+    from ._reproduce import run
+
+    run(args.out, quick=args.quick, log=lambda text: print(text, flush=True))
     return 0
 
 
+# --------------------------------------------------------------------------------------
+
+
+def _add_coefficients(parser, default=None, what="value"):
+    for k in COEFFICIENTS:
+        parser.add_argument(f"--{k}", type=float, default=default, metavar="WAVES",
+                            help=f"{COEFFICIENT_NAMES[k]} coefficient {what} [waves]"
+                            + ("" if default is None else f" (default {default})"))
+
+
+def _add_spectra(parser, defaults: bool):
+    parser.add_argument("--signal", default="markov:1,5" if defaults else None,
+                        help=SIGNAL_HELP + " (default markov:1,5)")
+    parser.add_argument("--noise", type=float, default=1e-3 if defaults else None,
+                        metavar="VARIANCE",
+                        help="white noise power spectral density S_n (default 1e-3)")
+
+
 def build_parser() -> argparse.ArgumentParser:
+    fmt = argparse.ArgumentDefaultsHelpFormatter
     parser = _Parser(
         prog="jmse-jax",
         description="JMSE (Wiener-restoration MSE) merit for computational-imaging design. "
-        "Frequencies are in units of the optical cutoff 1/(lambda N); wavefront coefficients "
-        "in waves; u = sensor Nyquist / optical cutoff.",
+        + UNITS + " Lens quantities in mm.",
     )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    rep = sub.add_parser("reproduce", help="reproduce the paper's results into an output folder")
-    rep.add_argument("--out", default="jmse_output", help="output folder (default: jmse_output)")
+
+    ev = sub.add_parser(
+        "eval", help="JMSE, its gradient and the OTF for Seidel coefficients [waves]",
+        description="Evaluate the JMSE, its gradient with respect to the Seidel coefficients "
+        "and the OTF at a few frequencies. Values come from the defaults, then --json FILE "
+        "(an object with the same keys: w020 ... w111, field, u, noise, signal, preset, nu), "
+        "then the flags. " + UNITS)
+    _add_coefficients(ev, what="(default 0, or the Fig. 1 value with --point fig1)")
+    ev.add_argument("--point", dest="preset_point", choices=("zero", "fig1"), default="zero",
+                    help="starting coefficients: all zero, or the paper's Fig. 1 point")
+    ev.add_argument("--field", type=float, help="fractional field height in [0, 1] "
+                    f"(default {FIG1_FIELD})")
+    ev.add_argument("--u", type=float, help="sensor Nyquist / optical cutoff, in (0, 1.5] "
+                    f"(default {FIG1_U})")
+    _add_spectra(ev, defaults=False)
+    ev.add_argument("--preset", choices=PRESET_NAMES, help="jmse accuracy preset "
+                    "(default 'default')")
+    ev.add_argument("--nu", help="comma-separated frequencies [cutoff units 1/(lambda N)] at "
+                    "which the OTF is printed along nu_x and nu_y (default 0.05,0.1,0.2)")
+    ev.add_argument("--json", metavar="FILE", help="JSON file with the inputs (keys as flags)")
+    ev.add_argument("--out-json", metavar="FILE", help="write the numbers to FILE")
+    ev.set_defaults(func=_cmd_eval)
+
+    op = sub.add_parser(
+        "optimise", formatter_class=fmt,
+        help="optimise the paper's F/4.6 singlet (mm) for the field-averaged JMSE",
+        description="Optimise the paper's F/4.6, f = 9 mm, 10 deg N-BK7 singlet (the setup of "
+        "benchmarks/optimise_singlet.py): variables front curvature [1/mm], stop position "
+        "[mm] and image shift [mm]; the back curvature is solved for F/4.6. Objective: JMSE "
+        "averaged over fields 0, 0.7, 1.0. " + UNITS)
+    op.add_argument("--stop-distance", type=float, default=1.0,
+                    help="start: stop to front vertex [mm], in [0, 3]")
+    op.add_argument("--front-curvature", type=float, default=0.05,
+                    help="start: front curvature [1/mm], in [-0.1, 0.1]")
+    op.add_argument("--image-shift", type=float, default=0.0,
+                    help="start: image plane from paraxial focus [mm], + away from the lens")
+    op.add_argument("--variables", nargs="+", default=list(LENS_VARIABLES),
+                    help="lens parameters to optimise")
+    op.add_argument("--merit", choices=("jmse", "rms"), default="jmse",
+                    help="JMSE or RMS wavefront [waves]")
+    op.add_argument("--preset", choices=PRESET_NAMES, default="fast", help="jmse preset")
+    op.add_argument("--u", type=float, default=0.2, help="sensor Nyquist / optical cutoff")
+    _add_spectra(op, defaults=True)
+    op.add_argument("--max-steps", type=int, default=200, help="solver step limit")
+    op.add_argument("--out-json", metavar="FILE", help="write the result to FILE")
+    op.set_defaults(func=_cmd_optimise)
+
+    sw = sub.add_parser(
+        "sweep", formatter_class=fmt,
+        help="JMSE over a small aberration hypercube; .npz + JSON into --out",
+        description="JMSE over every combination of the given axes (jmse_jax.hypercube + "
+        "sweep_jmse). Each --axis NAME=MIN,MAX,N gives N equally spaced values of NAME "
+        f"({', '.join(SWEEP_AXES)}); the other coefficients take their flag values. Default "
+        "axes: w020=-3,3,5 and w222=-1.5,1.5,3 (waves). " + UNITS)
+    sw.add_argument("--axis", action="append", metavar="NAME=MIN,MAX,N",
+                    help="a grid axis (repeatable); coefficients in waves")
+    _add_coefficients(sw, default=0.0, what="held fixed when not an axis")
+    sw.add_argument("--field", type=float, default=FIG1_FIELD,
+                    help="fractional field height in [0, 1] (when not an axis)")
+    sw.add_argument("--u", type=float, default=FIG1_U,
+                    help="sensor Nyquist / optical cutoff in (0, 1.5] (when not an axis)")
+    _add_spectra(sw, defaults=True)
+    sw.add_argument("--preset", choices=PRESET_NAMES, default="fast", help="jmse preset")
+    sw.add_argument("--grad", action="store_true", help="also store the gradients")
+    sw.add_argument("--batch-size", type=int, default=16, help="designs per vmap chunk")
+    sw.add_argument("--max-designs", type=int, default=10000, help="refuse larger grids")
+    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    sw.add_argument("--out", default="jmse_output/sweep", help="output folder")
+    sw.set_defaults(func=_cmd_sweep)
+
+    be = sub.add_parser(
+        "bench", formatter_class=fmt,
+        help="run benchmarks/run_all.py --quick, or a built-in timing (--builtin)",
+        description="Without --builtin: run the repository's benchmarks/run_all.py --quick "
+        "(--full: everything, ~20 min) if the benchmarks folder is next to the package. With "
+        "--builtin: time jmse (fast preset) against baseline_jmse B = 64 at the Fig. 1 point "
+        "(field 0.95, u = 0.2 Nyquist/cutoff, waves). Times in ms, float64.")
+    be.add_argument("--builtin", action="store_true", help="tiny built-in timing only")
+    be.add_argument("--full", action="store_true", help="run_all.py without --quick")
+    be.add_argument("--repeats", type=int, default=5, help="timing repeats (--builtin)")
+    be.add_argument("--out-json", metavar="FILE", help="write the timings (--builtin)")
+    be.set_defaults(func=_cmd_bench)
+
+    rep = sub.add_parser(
+        "reproduce", formatter_class=fmt,
+        help="reproduce the paper's Fig. 1 and Fig. 4 (right) into an output folder",
+        description="Berkner & Shroff's Fig. 1 point (baseline B = 64 vs jmse), the Fig. 1 "
+        "maps (OPD [waves] and log10 S_e over the band, frequencies in cutoff units "
+        "1/(lambda N), u = 0.2 Nyquist/cutoff) and Fig. 4 right (JMSE versus p for the "
+        "quadrature rules at defocus -6 and -2.75 waves), as PNG + JSON + markdown. "
+        "A few minutes on a 2-core CPU.")
+    rep.add_argument("--out", default="jmse_output", help="output folder")
+    rep.add_argument("--quick", action="store_true", help="coarse grids, for testing")
     rep.set_defaults(func=_cmd_reproduce)
     return parser
 
@@ -96,7 +513,12 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except ValueError as e:
+        # UsageError and the library's validation errors: one line, exit status 2.
+        message = " ".join(str(e).split())
+        parser.exit(2, f"jmse-jax: error: {message}\n")
 
 
 if __name__ == "__main__":

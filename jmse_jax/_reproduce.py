@@ -1,0 +1,361 @@
+"""Compact reproduction of Berkner & Shroff's Fig. 1 and Fig. 4 (right) for ``jmse-jax reproduce``.
+
+The full experiments (finer grids, Fig. 4 left, machine records) live in
+``benchmarks/paper_figures.py``; this module only needs the installed package, so the console
+script works without the repository. Plots use matplotlib's Agg backend (no display needed).
+Callers switch on float64 (the library never does).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._aberrations import Seidel, wavefront
+from ._merit import baseline_jmse, jmse, jmse_options
+from ._otf import otf
+from ._quadrature import frequency_quadrature
+from ._spectra import MarkovSignal, WhiteNoise, error_spectral_density
+
+__all__ = ["FIG1", "FIG1_FIELD", "FIG1_U", "FIG1_REFERENCE", "run"]
+
+#: The paper's Fig. 1 operating point: Seidel coefficients [waves], field, u (SPEC §5).
+FIG1 = dict(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198)
+FIG1_FIELD = 0.95
+FIG1_U = 0.2
+#: Converged float64 JMSE of the Fig. 1 point (SPEC §5).
+FIG1_REFERENCE = 2.6539432e-3
+
+PAPER_RULES = ("rectangle", "trapezoid", "gauss", "gauss_polar")
+RULE_LABELS = {"rectangle": "rectangle", "trapezoid": "trapezoid", "gauss": "Gauss ⊗ Gauss",
+               "gauss_polar": "Gauss radial × trapezoid angular",
+               "polar": "polar Gauss panels (ours)"}
+THRESHOLDS = (1e-3, 1e-6)
+
+
+def fig1_spectra():
+    """``MarkovSignal(1, 5)`` and ``WhiteNoise(1e-3)``, the paper's signal and noise."""
+    return MarkovSignal(1.0, 5.0), WhiteNoise(1e-3)
+
+
+def _timed(fn, *args, repeats=5):
+    result = jax.block_until_ready(fn(*args))  # compile + first run
+    start = time.perf_counter()
+    for _ in range(repeats):
+        result = jax.block_until_ready(fn(*args))
+    return result, (time.perf_counter() - start) / repeats
+
+
+def fig1_comparison(repeats: int = 5, log: Callable = print) -> dict:
+    """JMSE and timings of the baseline (B = 64) and the default preset at the Fig. 1 point."""
+    ab = Seidel(**FIG1)
+    signal, noise = fig1_spectra()
+
+    def merit(a):
+        return jmse(a, FIG1_FIELD, FIG1_U, signal, noise)
+
+    def baseline(a):
+        return baseline_jmse(a, FIG1_FIELD, FIG1_U, signal, noise, B=64)
+
+    rows = {}
+    for name, fn in (("baseline B=64", baseline), ("jmse default", merit)):
+        (value, _), t_vg = _timed(jax.jit(jax.value_and_grad(fn)), ab, repeats=repeats)
+        _, t_v = _timed(jax.jit(fn), ab, repeats=repeats)
+        rows[name] = dict(jmse=float(value), time_value_s=t_v, time_value_and_grad_s=t_vg)
+    log("Fig. 1 operating point of Berkner & Shroff (field 0.95, u = 0.2,"
+        " MarkovSignal(1, 5), WhiteNoise(1e-3)); float64")
+    log(f"{'method':<16}{'JMSE':>14}{'rel. err':>11}{'value':>11}{'value+grad':>13}")
+    for name, row in rows.items():
+        row["relative_error"] = row["jmse"] / FIG1_REFERENCE - 1.0
+        log(f"{name:<16}{row['jmse']:>14.7e}{row['relative_error']:>+11.2e}"
+            f"{row['time_value_s'] * 1e3:>9.2f}ms{row['time_value_and_grad_s'] * 1e3:>11.2f}ms")
+    base, ours = rows["baseline B=64"]["jmse"], rows["jmse default"]["jmse"]
+    log(f"baseline vs default: {base / ours - 1.0:+.2%}")
+    return dict(reference=FIG1_REFERENCE, methods=rows, device=str(jax.devices()[0]))
+
+
+# --------------------------------------------------------------------------------------
+# Fig. 1: OPD and log10 S_e
+# --------------------------------------------------------------------------------------
+
+
+def fig1_maps(path, n_pupil: int = 128, n_freq: int = 121, wide: float = 0.6) -> dict:
+    """Plot the OPD [waves] and ``log10 S_e`` (over the band and over ``|nu| < wide``)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    aberrations = Seidel(**FIG1)
+    field, u = FIG1_FIELD, FIG1_U
+    signal, noise = fig1_spectra()
+    coords = np.linspace(-1.0, 1.0, n_pupil)
+    px, py = np.meshgrid(coords, coords, indexing="xy")
+    opd = np.asarray(wavefront(aberrations, px, py, field))
+    opd = np.where(px**2 + py**2 <= 1.0, opd, np.nan)
+    overlap = jmse_options("high")["overlap_nodes"]
+    # The tilt only multiplies H by a phase ramp: |H| and S_e are unchanged (as in jmse).
+    otf_at = jax.jit(lambda a, x, y: otf(a.without_tilt(), x, y, field, nodes=overlap))
+
+    def error_density(half_width):
+        freqs = np.linspace(-half_width, half_width, n_freq)
+        fx, fy = np.meshgrid(freqs, freqs, indexing="xy")
+        h = otf_at(aberrations, jnp.asarray(fx), jnp.asarray(fy))
+        return np.asarray(error_spectral_density(h, signal(fx, fy), noise(fx, fy)))
+
+    s_e_band, s_e_wide = error_density(u), error_density(wide)
+    value = float(jmse(aberrations, field, u, signal, noise))
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    im = axes[0].imshow(opd, origin="lower", extent=(-1, 1, -1, 1), cmap="RdBu_r")
+    axes[0].set_title("OPD [waves]")
+    axes[0].set_xlabel("x (pupil)")
+    axes[0].set_ylabel("y (pupil; field along +y)")
+    fig.colorbar(im, ax=axes[0])
+    im = axes[1].imshow(np.log10(s_e_band), origin="lower", extent=(-u, u, -u, u), cmap="gray")
+    axes[1].set_title("log10 S_e over the sensor band |ν_x|, |ν_y| < u")
+    axes[1].set_xlabel("ν_x [cutoff units 1/(λN)]")
+    axes[1].set_ylabel("ν_y")
+    fig.colorbar(im, ax=axes[1])
+    im = axes[2].imshow(np.log10(s_e_wide), origin="lower", extent=(-wide, wide, -wide, wide),
+                        cmap="gray")
+    axes[2].add_patch(Rectangle((-u, -u), 2 * u, 2 * u, fill=False, edgecolor="r"))
+    axes[2].set_title("log10 S_e beyond the band (red: the band); ridges = OTF zeros",
+                      fontsize=9)
+    axes[2].set_xlabel("ν_x [cutoff units 1/(λN)]")
+    fig.colorbar(im, ax=axes[2])
+    fig.suptitle(f"Berkner & Shroff Fig. 1 point: field {field}, u = {u}, JMSE = {value:.6e}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    finite = opd[np.isfinite(opd)]
+    return dict(seidel=FIG1, field=field, u=u, signal=repr(signal), noise=repr(noise),
+                jmse_default=value, opd_min=float(finite.min()), opd_max=float(finite.max()),
+                opd_rms=float(np.sqrt(np.mean((finite - finite.mean()) ** 2))),
+                log10_s_e_band_min=float(np.log10(s_e_band.min())),
+                log10_s_e_band_max=float(np.log10(s_e_band.max())),
+                pupil_grid=n_pupil, frequency_grid=n_freq, wide_half_width=wide)
+
+
+# --------------------------------------------------------------------------------------
+# Fig. 4 right: JMSE versus the number of frequency nodes
+# --------------------------------------------------------------------------------------
+
+
+def _rule_nodes(rule, u, p):
+    """Nodes and weights of ``rule`` with ``p**2`` OTF nodes per quadrant (flat, host)."""
+    if rule == "polar":
+        nu_x, nu_y, w = frequency_quadrature("polar", u, (p, max(p // 2, 1)))
+    else:
+        nu_x, nu_y, w = frequency_quadrature(rule, u, p)
+    return np.asarray(nu_x), np.asarray(nu_y), np.asarray(w)
+
+
+def jmse_versus_nodes(aberrations, field, u, signal, noise, rules, ps, overlap_nodes):
+    """JMSE of each rule at each ``p``, from one OTF evaluation over all their nodes.
+
+    ``JMSE = sum(w S_e) / (2 pi)`` over the folded quadrant (the Seidel wavefront is even in
+    x); the OTF is that of the de-tilted wavefront, as in ``jmse``.
+    """
+    segments, xs, ys, ws = [], [], [], []
+    offset = 0
+    for rule in rules:
+        for p in ps:
+            x, y, w = _rule_nodes(rule, u, p)
+            segments.append((rule, p, offset, offset + x.size))
+            offset += x.size
+            xs.append(x)
+            ys.append(y)
+            ws.append(w)
+    nu_x, nu_y = jnp.asarray(np.concatenate(xs)), jnp.asarray(np.concatenate(ys))
+    w = np.concatenate(ws)
+
+    @jax.jit
+    def error_density(aberrations, nu_x, nu_y):
+        h = otf(aberrations.without_tilt(), nu_x, nu_y, field, nodes=overlap_nodes)
+        return error_spectral_density(h, signal(nu_x, nu_y), noise(nu_x, nu_y))
+
+    s_e = np.asarray(error_density(aberrations, nu_x, nu_y))
+    values = {rule: {} for rule in rules}
+    for rule, p, start, stop in segments:
+        values[rule][p] = float(np.sum(w[start:stop] * s_e[start:stop]) / (2.0 * math.pi))
+    return values, int(nu_x.size)
+
+
+def first_stays_below(ps, errors, threshold):
+    """Smallest tested ``p`` from which every tested ``p' >= p`` has error < threshold."""
+    answer = None
+    for p in sorted(ps, reverse=True):
+        if errors[p] < threshold:
+            answer = p
+        else:
+            break
+    return answer
+
+
+def fig4_right(ps: Sequence[int], defocus_values=(-6.0, -2.75), reference_preset="high",
+               log: Callable = print) -> dict:
+    """JMSE versus ``p`` for the paper's four rules and ours, at each defocus [waves].
+
+    The converged value is ``jmse(preset=reference_preset)`` (at -2.75 the SPEC's value).
+    """
+    rules = PAPER_RULES + ("polar",)
+    overlap = jmse_options("high")["overlap_nodes"]
+    signal, noise = fig1_spectra()
+    out = dict(u=FIG1_U, field=FIG1_FIELD, ps=list(ps), overlap_nodes=list(overlap),
+               signal=repr(signal), noise=repr(noise), rules=list(rules), defocus={})
+    for defocus in defocus_values:
+        aberrations = Seidel(**{**FIG1, "w020": defocus})
+        start = time.perf_counter()
+        if defocus == FIG1["w020"]:
+            reference, source = FIG1_REFERENCE, "SPEC §5 (converged float64)"
+        else:
+            reference = float(jmse(aberrations, FIG1_FIELD, FIG1_U, signal, noise,
+                                   preset=reference_preset))
+            source = f"jmse(preset={reference_preset!r})"
+        values, n_nodes = jmse_versus_nodes(aberrations, FIG1_FIELD, FIG1_U, signal, noise,
+                                            rules, ps, overlap)
+        rows = {}
+        for rule in rules:
+            errors = {p: abs(values[rule][p] - reference) / abs(reference) for p in ps}
+            rows[rule] = dict(
+                jmse={str(p): values[rule][p] for p in ps},
+                relative_error={str(p): errors[p] for p in ps},
+                first_stays_below={f"{t:g}": first_stays_below(ps, errors, t)
+                                   for t in THRESHOLDS},
+            )
+        out["defocus"][str(defocus)] = dict(reference=reference, reference_source=source,
+                                            otf_evaluations=n_nodes, rules=rows,
+                                            seconds=time.perf_counter() - start)
+        log(f"      defocus {defocus:+.2f}: reference {reference:.9e}, {n_nodes} OTF nodes, "
+            f"{time.perf_counter() - start:.1f} s")
+    return out
+
+
+def plot_fig4_right(data, path):
+    """Two columns (one per defocus): JMSE versus p on top, relative error below."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ps = data["ps"]
+    fig, axes = plt.subplots(2, len(data["defocus"]), figsize=(11, 7.5), sharex=True,
+                             squeeze=False)
+    for column, (defocus, block) in enumerate(data["defocus"].items()):
+        top, bottom = axes[0, column], axes[1, column]
+        for i, rule in enumerate(data["rules"]):
+            style = dict(color=f"C{i}", marker="os^Dv"[i % 5], markersize=4,
+                         linewidth=2.0 if rule == "polar" else 1.2)
+            row = block["rules"][rule]
+            top.plot(ps, [row["jmse"][str(p)] for p in ps], label=RULE_LABELS[rule], **style)
+            bottom.plot(ps, [max(row["relative_error"][str(p)], 1e-16) for p in ps], **style)
+        reference = block["reference"]
+        top.axhline(reference, color="k", linestyle="--", linewidth=1, label="converged value")
+        spread = [block["rules"][r]["jmse"][str(p)] for r in data["rules"] for p in ps
+                  if p >= 8] or [reference]
+        low, high = min(spread + [reference]), max(spread + [reference])
+        margin = 0.1 * (high - low) + 1e-3 * abs(reference)
+        top.set_ylim(low - margin, high + margin)
+        top.set_title(f"defocus w020 = {float(defocus):g} waves (Fig. 1 aberrations, u = 0.2)")
+        top.set_ylabel("JMSE")
+        top.grid(alpha=0.3)
+        for t in THRESHOLDS:
+            bottom.axhline(t, color="0.5", linestyle=":", linewidth=1)
+        bottom.set_yscale("log")
+        bottom.set_xscale("log", base=2)
+        bottom.set_xlabel("p (nodes per axis per quadrant; p² OTF nodes per quadrant)")
+        bottom.set_ylabel("relative error")
+        bottom.grid(alpha=0.3, which="both")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("Berkner & Shroff Fig. 4 (right): JMSE versus frequency nodes")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------------------
+
+
+def _p(x):
+    return "not within the tested p" if x is None else f"p = {x} ({x * x} nodes/quadrant)"
+
+
+def markdown(report) -> str:
+    """A short report of ``run``'s numbers."""
+    comparison = report["fig1_comparison"]["methods"]
+    lines = ["# Berkner & Shroff, reproduced by `jmse-jax reproduce`"
+             + (" (quick)" if report["quick"] else ""), "",
+             f"jax {jax.__version__}, {report['device']}, float64, {report['seconds']:.0f} s.",
+             "", "## Fig. 1 operating point", "",
+             "Seidel " + ", ".join(f"{k} = {v}" for k, v in FIG1.items())
+             + f" waves, field {FIG1_FIELD}, u = {FIG1_U} (Nyquist / cutoff), MarkovSignal(1, 5),"
+             " WhiteNoise(1e-3).", "",
+             "| method | JMSE | relative error | value [ms] | value + grad [ms] |",
+             "|---|---|---|---|---|"]
+    for name, row in comparison.items():
+        lines.append(f"| {name} | {row['jmse']:.7e} | {row['relative_error']:+.2e} | "
+                     f"{row['time_value_s'] * 1e3:.2f} | "
+                     f"{row['time_value_and_grad_s'] * 1e3:.2f} |")
+    f1 = report["fig1"]
+    lines += ["", f"Reference {FIG1_REFERENCE:.7e} (SPEC §5). OPD from {f1['opd_min']:.2f} to "
+              f"{f1['opd_max']:.2f} waves (RMS {f1['opd_rms']:.2f}); log10 S_e over the band "
+              f"from {f1['log10_s_e_band_min']:.2f} to {f1['log10_s_e_band_max']:.2f}. "
+              "Maps: `fig1.png`.", "",
+              "## Fig. 4 right: JMSE versus frequency nodes (u = 0.2)", "",
+              "OTF evaluated directly at each rule's nodes; *stays below* = the smallest tested "
+              "p from which every larger tested p stays below the threshold. Plot: "
+              "`fig4_right.png`.", "",
+              "| defocus [waves] | rule | stays < 1e-3 from | stays < 1e-6 from | "
+              "error at largest p |", "|---|---|---|---|---|"]
+    f4 = report["fig4_right"]
+    last = str(f4["ps"][-1])
+    for defocus, block in f4["defocus"].items():
+        for rule in f4["rules"]:
+            row = block["rules"][rule]
+            lines.append(f"| {defocus} | {RULE_LABELS[rule]} | "
+                         f"{_p(row['first_stays_below']['0.001'])} | "
+                         f"{_p(row['first_stays_below']['1e-06'])} | "
+                         f"{row['relative_error'][last]:.1e} |")
+    lines += ["", "References: " + "; ".join(
+        f"defocus {d}: {b['reference']:.9e} ({b['reference_source']})"
+        for d, b in f4["defocus"].items()), ""]
+    return "\n".join(lines) + "\n"
+
+
+def run(out_dir, quick: bool = False, log: Callable = print) -> dict:
+    """Write ``fig1_comparison.json``, ``fig1.png``, ``fig4_right.png``, ``reproduce.json``
+    and ``reproduce.md`` into ``out_dir``; progress goes to ``log``."""
+    start = time.perf_counter()
+    os.makedirs(out_dir, exist_ok=True)
+    steps = 4
+    log(f"[1/{steps}] Fig. 1 point: baseline B=64 vs jmse default (compiling, then timing)")
+    comparison = fig1_comparison(repeats=1 if quick else 5, log=log)
+    with open(os.path.join(out_dir, "fig1_comparison.json"), "w") as f:
+        json.dump(comparison, f, indent=2)
+    log(f"[2/{steps}] Fig. 1 maps: OPD and log10 S_e")
+    figure1 = fig1_maps(os.path.join(out_dir, "fig1.png"),
+                        *((48, 41) if quick else (128, 121)))
+    log(f"[3/{steps}] Fig. 4 right: JMSE versus p for 5 quadrature rules, defocus -6 and -2.75")
+    ps = (4, 8, 16) if quick else (4, 6, 8, 12, 16, 24, 32, 48, 64)
+    right = fig4_right(ps, reference_preset="default" if quick else "high", log=log)
+    plot_fig4_right(right, os.path.join(out_dir, "fig4_right.png"))
+    log(f"[4/{steps}] writing the report")
+    report = dict(description="Berkner & Shroff Fig. 1 and Fig. 4 (right), jmse-jax reproduce",
+                  quick=quick, device=str(jax.devices()[0]), jax_version=jax.__version__,
+                  fig1_comparison=comparison, fig1=figure1, fig4_right=right,
+                  seconds=time.perf_counter() - start)
+    with open(os.path.join(out_dir, "reproduce.json"), "w") as f:
+        json.dump(report, f, indent=2)
+    with open(os.path.join(out_dir, "reproduce.md"), "w") as f:
+        f.write(markdown(report))
+    log(f"wrote {out_dir}/: fig1_comparison.json, fig1.png, fig4_right.png, reproduce.json, "
+        f"reproduce.md ({report['seconds']:.0f} s)")
+    return report

@@ -1,0 +1,183 @@
+"""The ``jmse-jax`` subcommands, run in-process through ``jmse_jax.cli.main``."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import FIG1_COEFFICIENTS
+
+import jmse_jax as jj
+from jmse_jax import cli
+
+FIG1_FLAGS = [f"--{k}={v}" for k, v in FIG1_COEFFICIENTS.items()]
+
+
+def run_cli(capsys, *argv):
+    """(exit status, stdout, stderr) of ``jmse-jax argv``."""
+    try:
+        status = cli.main(list(argv))
+    except SystemExit as e:
+        status = e.code
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+# --------------------------------------------------------------------------------------
+# help and bad arguments
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("command, words", [
+    ((), ("waves", "1/(lambda N)", "Nyquist")),
+    (("eval",), ("waves", "1/(lambda N)", "Nyquist / optical cutoff")),
+    (("optimise",), ("mm", "1/mm", "waves")),
+    (("sweep",), ("waves", "Nyquist")),
+    (("bench",), ("--builtin", "B = 64")),
+    (("reproduce",), ("waves", "1/(lambda N)", "--out")),
+])
+def test_help_mentions_units(capsys, command, words):
+    status, out, _ = run_cli(capsys, *command, "--help")
+    assert status == 0
+    text = " ".join(out.split())
+    for word in words:
+        assert word in text, (command, word)
+
+
+@pytest.mark.parametrize("argv", [
+    (),
+    ("frobnicate",),
+    ("eval", "--field", "abc"),
+    ("eval", "--preset", "ultra"),
+    ("eval", "--field", "1.5"),
+    ("eval", "--u", "2"),
+    ("eval", "--noise", "-1"),
+    ("eval", "--signal", "gauss:1"),
+    ("eval", "--signal", "markov:1"),
+    ("eval", "--nu", "0.1,x"),
+    ("eval", "--json", "/nonexistent/inputs.json"),
+    ("optimise", "--front-curvature", "0.5"),
+    ("optimise", "--stop-distance", "-1"),
+    ("sweep", "--axis", "w999=0,1,3"),
+    ("sweep", "--axis", "w020=0,1"),
+    ("sweep", "--axis", "w020=0,1,2.5"),
+    ("sweep", "--axis", "w020=-1,1,200", "--axis", "w222=-1,1,200"),
+])
+def test_bad_arguments_exit_2_with_one_line(capsys, argv):
+    status, out, err = run_cli(capsys, *argv)
+    assert status == 2
+    assert len(err.strip().splitlines()) == 1, err
+    assert err.startswith("jmse-jax: error: ")
+
+
+def test_eval_json_with_unknown_key_exits_2(capsys, tmp_path):
+    path = tmp_path / "in.json"
+    path.write_text(json.dumps({"w020": 1.0, "focus": 2.0}))
+    status, _, err = run_cli(capsys, "eval", "--json", str(path))
+    assert status == 2 and "focus" in err and len(err.strip().splitlines()) == 1
+
+
+def test_bench_without_benchmarks_folder_is_a_clear_error(capsys, monkeypatch, tmp_path):
+    monkeypatch.setattr(cli, "benchmarks_folder", lambda: tmp_path / "benchmarks")
+    status, _, err = run_cli(capsys, "bench")
+    assert status == 2 and "--builtin" in err
+
+
+# --------------------------------------------------------------------------------------
+# eval
+# --------------------------------------------------------------------------------------
+
+
+def test_eval_matches_library(capsys, tmp_path):
+    out_json = tmp_path / "eval.json"
+    status, out, _ = run_cli(capsys, "eval", *FIG1_FLAGS, "--field", "0.95", "--u", "0.2",
+                             "--preset", "fast", "--nu", "0.1,0.2",
+                             "--out-json", str(out_json))
+    assert status == 0
+    result = json.loads(out_json.read_text())
+    ab = jj.Seidel(**FIG1_COEFFICIENTS)
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    expected = float(jj.jmse(ab, 0.95, 0.2, signal, noise, preset="fast"))
+    assert result["jmse"] == pytest.approx(expected, rel=1e-12)
+    assert f"{expected:.10e}" in out
+    assert set(result["gradient"]) == set(cli.COEFFICIENTS)
+    assert result["gradient"]["w020"] != 0.0
+    h = complex(jj.otf(ab, 0.1, 0.0, 0.95))
+    assert result["otf"][0]["nu"] == 0.1
+    assert result["otf"][0]["nu_x"]["re"] == pytest.approx(h.real, abs=1e-12)
+    assert result["otf"][0]["nu_x"]["im"] == pytest.approx(h.imag, abs=1e-12)
+
+
+def test_eval_json_input_and_flag_override(capsys, tmp_path):
+    inputs = tmp_path / "in.json"
+    inputs.write_text(json.dumps({**FIG1_COEFFICIENTS, "field": 0.5, "u": 0.3,
+                                  "noise": 1e-2, "signal": "powerlaw:1,2,0.05",
+                                  "preset": "fast"}))
+    out_json = tmp_path / "eval.json"
+    status, _, _ = run_cli(capsys, "eval", "--json", str(inputs), "--w020", "-1",
+                           "--out-json", str(out_json))
+    assert status == 0
+    result = json.loads(out_json.read_text())
+    assert result["inputs"]["w020"] == -1.0 and result["inputs"]["w222"] == 1.4089
+    ab = jj.Seidel(**{**FIG1_COEFFICIENTS, "w020": -1.0})
+    expected = float(jj.jmse(ab, 0.5, 0.3, jj.PowerLawSignal(1.0, 2.0, 0.05),
+                             jj.WhiteNoise(1e-2), preset="fast"))
+    assert result["jmse"] == pytest.approx(expected, rel=1e-12)
+
+
+# --------------------------------------------------------------------------------------
+# optimise, sweep, bench, reproduce
+# --------------------------------------------------------------------------------------
+
+
+def test_optimise_reduces_the_merit(capsys, tmp_path):
+    out_json = tmp_path / "opt.json"
+    status, out, _ = run_cli(capsys, "optimise", "--variables", "image_shift",
+                             "--max-steps", "30", "--out-json", str(out_json))
+    assert status == 0
+    assert "JMSE (mean)" in out
+    result = json.loads(out_json.read_text())
+    assert result["jmse"] < result["start_jmse"]
+    assert set(result["parameters"]) == {"image_shift"}
+
+
+def test_sweep_writes_npz_and_json(capsys, tmp_path):
+    status, out, _ = run_cli(capsys, "sweep", "--axis", "w020=-1,1,3", "--axis",
+                             "field=0,1,2", "--w222", "0.5", "--quiet", "--out",
+                             str(tmp_path))
+    assert status == 0
+    result = jj.SweepResult.load(tmp_path / "sweep.npz")
+    assert result.n_designs == 6 and result.ok.all()
+    assert (tmp_path / "sweep.json").is_file()
+    summary = json.loads((tmp_path / "sweep_summary.json").read_text())
+    assert summary["n_designs"] == 6
+    # Second design: w020 = -1, field = 1 (last axis fastest).
+    expected = float(jj.jmse(jj.Seidel(w020=-1.0, w222=0.5), 1.0, 0.2,
+                             jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3), preset="fast"))
+    assert np.asarray(result.value)[1] == pytest.approx(expected, rel=1e-10)
+
+
+def test_bench_builtin(capsys, tmp_path):
+    out_json = tmp_path / "bench.json"
+    status, out, _ = run_cli(capsys, "bench", "--builtin", "--repeats", "1",
+                             "--out-json", str(out_json))
+    assert status == 0
+    methods = json.loads(out_json.read_text())["methods"]
+    assert set(methods) == {"baseline B=64", "jmse fast"}
+    assert methods["jmse fast"]["jmse"] == pytest.approx(2.6539432e-3, rel=1e-5)
+
+
+def test_reproduce_quick_writes_figures_and_report(capsys, tmp_path):
+    status, out, _ = run_cli(capsys, "reproduce", "--quick", "--out", str(tmp_path))
+    assert status == 0
+    for name in ("fig1_comparison.json", "fig1.png", "fig4_right.png", "reproduce.json",
+                 "reproduce.md"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    assert "[4/4]" in out
+    report = json.loads((tmp_path / "reproduce.json").read_text())
+    ours = report["fig1_comparison"]["methods"]["jmse default"]["jmse"]
+    assert ours == pytest.approx(2.6539432e-3, rel=1e-6)
+    rules = report["fig4_right"]["defocus"]["-2.75"]["rules"]
+    assert rules["gauss"]["relative_error"]["16"] < rules["rectangle"]["relative_error"]["16"]
+    assert "Fig. 4 right" in (tmp_path / "reproduce.md").read_text()
