@@ -23,7 +23,7 @@ test: $(BIN)/.installed
 	$(BIN)/python -m pytest -q
 
 lint: $(BIN)/.installed
-	$(BIN)/ruff check jmse_jax tests benchmarks
+	$(BIN)/ruff check jmse_jax tests benchmarks notebooks
 
 bench: $(BIN)/.installed
 	$(BIN)/python benchmarks/run_all.py
