@@ -26,6 +26,7 @@ from ._quadrature import (
     frequency_quadrature,
     polar_interpolation_matrices,
     polar_panels,
+    radial_panel_sizes,
 )
 from ._spectra import AbstractNoise, AbstractSignal, error_spectral_density
 
@@ -129,23 +130,52 @@ def _otf_at(aberrations, nu_x, nu_y, field, options):
     return _otf_fft(aberrations, nu_x, nu_y, field, options["B"])
 
 
+#: Smallest overlap order used on the innermost radial panel (see ``_polar_otf``).
+_OVERLAP_MIN_ORDER = 24
+
+
+def _polar_otf(aberrations, nu_x, nu_y, field, options):
+    """OTF on the coarse polar nodes ``(2, n_angular, n_radial)``, panel by radial panel.
+
+    The phase difference across the overlap lens grows with ``|nu|``, so the overlap rule's
+    order is reduced on the inner radial panels in proportion to their outer radius
+    ``t_max``: ``n = n_min + (n_full - n_min) t_max`` (the full order on the outer panel).
+    """
+    if options["otf_method"] != "overlap":
+        return _otf_at(aberrations, nu_x, nu_y, field, options)
+    n_phi, n_t = options["overlap_nodes"]
+    parts, start = [], 0
+    for count, t_max in radial_panel_sizes(nu_x.shape[-1]):
+        order = tuple(
+            min(n, math.ceil(_OVERLAP_MIN_ORDER + (n - _OVERLAP_MIN_ORDER) * t_max))
+            for n in (n_phi, n_t)
+        )
+        stop = start + count
+        parts.append(_otf_overlap(aberrations, nu_x[..., start:stop], nu_y[..., start:stop],
+                                  field, order))
+        start = stop
+    return jnp.concatenate(parts, axis=-1)
+
+
 def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror):
     """``\\iint_band S_e`` over the folded first quadrant (``mirror``: the x-mirrored one)."""
     sign = -1.0 if mirror else 1.0
     if options["quadrature"] == "polar":
         coarse = polar_panels(u, *options["nodes"], dtype)
-        h = _otf_at(aberrations, sign * coarse.nu_x, coarse.nu_y, field, options)
-        panels = coarse
-        if options["se_nodes"] is not None:
-            panels = polar_panels(u, *options["se_nodes"], dtype)
-            l_r, l_a = (jnp.asarray(m, dtype) for m in
-                        polar_interpolation_matrices(options["nodes"], options["se_nodes"]))
-            # Separable interpolation, one axis at a time (real matrices on complex data).
-            h = jnp.matmul(l_a, jnp.matmul(h, l_r.T))
-        s_x = signal(panels.nu_x, panels.nu_y)
-        s_e = error_spectral_density(h, s_x, noise(panels.nu_x, panels.nu_y))
-        s_x_out = signal(panels.outer_nu_x, panels.outer_nu_y)  # H = 0 beyond the cutoff
-        return jnp.sum(panels.weights * s_e) + jnp.sum(panels.outer_weights * s_x_out)
+        h = _polar_otf(aberrations, sign * coarse.nu_x, coarse.nu_y, field, options)
+        if options["se_nodes"] is None:
+            s_e = error_spectral_density(h, signal(coarse.nu_x, coarse.nu_y),
+                                         noise(coarse.nu_x, coarse.nu_y))
+            s_x_out = signal(coarse.outer_nu_x, coarse.outer_nu_y)  # H = 0 past the cutoff
+            return jnp.sum(coarse.weights * s_e) + jnp.sum(coarse.outer_weights * s_x_out)
+        fine = polar_panels(u, *options["se_nodes"], dtype)
+        l_r, l_a = (jnp.asarray(m, dtype) for m in
+                    polar_interpolation_matrices(options["nodes"], options["se_nodes"]))
+        # Separable interpolation, radial axis first (the cheaper order).
+        h = jnp.matmul(l_a, jnp.matmul(h, l_r.T))
+        s_e = error_spectral_density(h, signal(fine.nu_x, fine.nu_y), noise(fine.nu_x, fine.nu_y))
+        s_x_out = signal(fine.outer_nu_x, fine.outer_nu_y)  # H = 0 beyond the cutoff
+        return jnp.sum(fine.weights * s_e) + jnp.sum(fine.outer_weights * s_x_out)
     nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
     h = _otf_at(aberrations, sign * nu_x, nu_y, field, options)
     s_e = error_spectral_density(h, signal(nu_x, nu_y), noise(nu_x, nu_y))

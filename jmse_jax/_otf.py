@@ -54,7 +54,7 @@ OTF_METHODS = ("overlap", "nudft", "fft")
 
 # Frequency nodes processed per block by the overlap engine (bounds the working memory to
 # about 8 * 2 * block * n_phi * n_t bytes per temporary).
-_OVERLAP_BLOCK = 2048
+_OVERLAP_BLOCK = 128
 
 
 def diffraction_limited_otf(r):

@@ -40,6 +40,7 @@ __all__ = [
     "frequency_quadrature",
     "polar_interpolation_matrices",
     "polar_panels",
+    "radial_panel_sizes",
 ]
 
 QUADRATURES = ("polar", "gauss", "gauss_polar", "trapezoid", "rectangle")
@@ -71,6 +72,11 @@ _RADIAL_SHARES = (0.3, 0.3, 0.4)
 
 def _radial_panels() -> list[tuple[float, float]]:
     return list(zip(_RADIAL_EDGES[:-1], _RADIAL_EDGES[1:], strict=True))
+
+
+def radial_panel_sizes(n: int) -> list[tuple[int, float]]:
+    """``(nodes, t_max)`` of each radial panel of the polar rule with ``n`` radial nodes."""
+    return [(k, b) for k, (_, b) in zip(_radial_counts(n), _radial_panels(), strict=True)]
 
 
 def _radial_counts(n: int) -> tuple[int, ...]:

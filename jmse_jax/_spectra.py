@@ -61,7 +61,8 @@ class MarkovSignal(AbstractSignal):
     def radial(self, r):
         mu = self.correlation_length
         two_pi_mu = 2.0 * math.pi * mu
-        return self.variance * two_pi_mu * mu / (1.0 + (two_pi_mu * r) ** 2) ** 1.5
+        q = 1.0 + (two_pi_mu * r) ** 2
+        return self.variance * two_pi_mu * mu / (q * jnp.sqrt(q))  # q**1.5 without pow
 
 
 class PowerLawSignal(AbstractSignal):
