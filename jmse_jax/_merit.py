@@ -44,7 +44,7 @@ PRESETS: dict[str, dict] = {
         overlap_nodes=(28, 28),
     ),
     "default": dict(
-        quadrature="polar", nodes=(48, 24), se_nodes=(1200, 720), otf_method="overlap",
+        quadrature="polar", nodes=(48, 24), se_nodes=(1200, 192), otf_method="overlap",
         overlap_nodes=(32, 32),
     ),
     "high": dict(
