@@ -40,11 +40,11 @@ import sys
 import time
 
 import _common as common
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 import jmse_jax as jj
+from jmse_jax import _reproduce as reproduce
+from jmse_jax._reproduce import first_stays_below, jmse_versus_nodes
 
 PAPER_RULES = ("rectangle", "trapezoid", "gauss", "gauss_polar")
 RULE_LABELS = {"rectangle": "rectangle", "trapezoid": "trapezoid", "gauss": "Gauss ⊗ Gauss",
@@ -57,47 +57,6 @@ WAVE_TENTH = 0.1
 # --------------------------------------------------------------------------------------
 # Fig. 4 right: JMSE versus the number of frequency nodes
 # --------------------------------------------------------------------------------------
-
-
-def _rule_nodes(rule, u, p):
-    """Nodes and weights of ``rule`` with ``p**2`` OTF nodes per quadrant (flat, host)."""
-    if rule == "polar":
-        nu_x, nu_y, w = jj.frequency_quadrature("polar", u, (p, max(p // 2, 1)))
-        # The polar rule appends nodes beyond the cutoff (H = 0); at u = 0.2 they weigh 0.
-    else:
-        nu_x, nu_y, w = jj.frequency_quadrature(rule, u, p)
-    return np.asarray(nu_x), np.asarray(nu_y), np.asarray(w)
-
-
-def jmse_versus_nodes(aberrations, field, u, signal, noise, rules, ps, overlap_nodes):
-    """JMSE of each rule at each ``p``, with one OTF evaluation over all their nodes.
-
-    ``JMSE = sum(w S_e) / (2 pi)`` over the folded quadrant (the Seidel wavefront is even in
-    x), with the OTF of the de-tilted wavefront as ``jmse`` uses it.
-    """
-    segments, xs, ys, ws = [], [], [], []
-    offset = 0
-    for rule in rules:
-        for p in ps:
-            x, y, w = _rule_nodes(rule, u, p)
-            segments.append((rule, p, offset, offset + x.size))
-            offset += x.size
-            xs.append(x)
-            ys.append(y)
-            ws.append(w)
-    nu_x, nu_y, w = (jnp.asarray(np.concatenate(a)) for a in (xs, ys, ws))
-
-    @jax.jit
-    def error_density(aberrations, nu_x, nu_y):
-        h = jj.otf(aberrations.without_tilt(), nu_x, nu_y, field, nodes=overlap_nodes)
-        return jj.error_spectral_density(h, signal(nu_x, nu_y), noise(nu_x, nu_y))
-
-    s_e = np.asarray(error_density(aberrations, nu_x, nu_y))
-    w = np.asarray(w)
-    values = {rule: {} for rule in rules}
-    for rule, p, start, stop in segments:
-        values[rule][p] = float(np.sum(w[start:stop] * s_e[start:stop]) / (2.0 * math.pi))
-    return values, int(nu_x.size)
 
 
 def converged_value(case, aberrations, signal, noise, quick=False):
@@ -120,17 +79,6 @@ def converged_value(case, aberrations, signal, noise, quick=False):
                  f"{case.convergence:.1e} and differs by "
                  f"{abs(case.reference - value) / value:.1e}")
     return value, abs(value_high - value) / abs(value), note
-
-
-def first_stays_below(ps, errors, threshold):
-    """Smallest tested ``p`` from which every tested ``p' >= p`` has error < threshold."""
-    answer = None
-    for p in sorted(ps, reverse=True):
-        if errors[p] < threshold:
-            answer = p
-        else:
-            break
-    return answer
 
 
 def fig4_right(quick, cases_by_name):
@@ -387,59 +335,14 @@ def plot_fig4_left(data, path):
 
 
 def fig1(quick, path, wide=0.6):
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle
-
-    aberrations = jj.Seidel(**common.FIG1)
-    field, u = common.FIG1_FIELD, common.FIG1_U
-    signal, noise = common.fig1_signal(), common.fig1_noise()
+    """Fig. 1 of the paper (OPD and log10 S_e maps): the package's own plot, at benchmark size."""
     n_pupil, n_freq = (64, 61) if quick else (256, 201)
-    coords = np.linspace(-1.0, 1.0, n_pupil)
-    px, py = np.meshgrid(coords, coords, indexing="xy")
-    opd = np.asarray(jj.wavefront(aberrations, px, py, field))
-    opd = np.where(px**2 + py**2 <= 1.0, opd, np.nan)
-    overlap = jj.jmse_options("high")["overlap_nodes"]
-    otf_on_grid = jax.jit(lambda a, x, y: jj.otf(a.without_tilt(), x, y, field, nodes=overlap))
-
-    def error_density(half_width):
-        freqs = np.linspace(-half_width, half_width, n_freq)
-        fx, fy = np.meshgrid(freqs, freqs, indexing="xy")
-        h = otf_on_grid(aberrations, jnp.asarray(fx), jnp.asarray(fy))
-        return np.asarray(jj.error_spectral_density(h, signal(fx, fy), noise(fx, fy)))
-
     start = time.perf_counter()
-    s_e_band, s_e_wide = error_density(u), error_density(wide)
-    seconds = time.perf_counter() - start
-    value = float(jj.jmse(aberrations, field, u, signal, noise))
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
-    im = axes[0].imshow(opd, origin="lower", extent=(-1, 1, -1, 1), cmap="RdBu_r")
-    axes[0].set_title("OPD [waves]")
-    axes[0].set_xlabel("x (pupil)")
-    axes[0].set_ylabel("y (pupil; field along +y)")
-    fig.colorbar(im, ax=axes[0])
-    im = axes[1].imshow(np.log10(s_e_band), origin="lower", extent=(-u, u, -u, u), cmap="gray")
-    axes[1].set_title("log10 S_e over the sensor band |ν_x|, |ν_y| < u")
-    axes[1].set_xlabel("ν_x [cutoff units]")
-    axes[1].set_ylabel("ν_y")
-    fig.colorbar(im, ax=axes[1])
-    im = axes[2].imshow(np.log10(s_e_wide), origin="lower", extent=(-wide, wide, -wide, wide),
-                        cmap="gray")
-    axes[2].add_patch(Rectangle((-u, -u), 2 * u, 2 * u, fill=False, edgecolor="r"))
-    axes[2].set_title("log10 S_e beyond the band (red: the band); ridges = OTF zeros",
-                      fontsize=9)
-    axes[2].set_xlabel("ν_x [cutoff units]")
-    fig.colorbar(im, ax=axes[2])
-    fig.suptitle(f"Berkner & Shroff Fig. 1 point: field {field}, u = {u}, JMSE = {value:.6e}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    finite = opd[np.isfinite(opd)]
-    return dict(seidel=common.FIG1, field=field, u=u, signal=repr(signal), noise=repr(noise),
-                jmse_default=value, opd_min=float(finite.min()), opd_max=float(finite.max()),
-                opd_rms=float(np.sqrt(np.mean((finite - finite.mean()) ** 2))),
-                s_e_min=float(s_e_band.min()), s_e_max=float(s_e_band.max()),
-                pupil_grid=n_pupil, frequency_grid=n_freq, wide_half_width=wide,
-                seconds=seconds)
+    data = reproduce.fig1_maps(path, n_pupil=n_pupil, n_freq=n_freq, wide=wide)
+    data["seconds"] = time.perf_counter() - start
+    data["s_e_min"] = 10.0 ** data["log10_s_e_band_min"]
+    data["s_e_max"] = 10.0 ** data["log10_s_e_band_max"]
+    return data
 
 
 # --------------------------------------------------------------------------------------

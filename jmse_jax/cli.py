@@ -16,7 +16,6 @@ import os
 import pathlib
 import subprocess
 import sys
-import time
 
 from ._reproduce import FIG1, FIG1_FIELD, FIG1_U
 
@@ -92,16 +91,6 @@ def _positive(name, value) -> float:
     if not (math.isfinite(value) and value > 0):
         raise UsageError(f"{name} must be a positive number, got {value!r}")
     return value
-
-
-def _timed(fn, *args, repeats=5):
-    import jax
-
-    result = jax.block_until_ready(fn(*args))  # compile + first run
-    start = time.perf_counter()
-    for _ in range(repeats):
-        result = jax.block_until_ready(fn(*args))
-    return result, (time.perf_counter() - start) / repeats
 
 
 def _write_json(path, data):
@@ -338,6 +327,7 @@ def builtin_bench(repeats: int = 5) -> dict:
     import jax
 
     import jmse_jax as jj
+    from jmse_jax._reproduce import _timed as timed
 
     ab = jj.Seidel(**FIG1)
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
@@ -348,8 +338,8 @@ def builtin_bench(repeats: int = 5) -> dict:
                                                  preset="fast")))
     print(f"{'method':<16}{'JMSE':>14}{'value':>12}{'value+grad':>13}", flush=True)
     for name, fn in cases:
-        value, t_v = _timed(jax.jit(fn), ab, repeats=repeats)
-        _, t_vg = _timed(jax.jit(jax.value_and_grad(fn)), ab, repeats=repeats)
+        value, t_v = timed(jax.jit(fn), ab, repeats=repeats)
+        _, t_vg = timed(jax.jit(jax.value_and_grad(fn)), ab, repeats=repeats)
         rows[name] = dict(jmse=float(value), time_value_s=t_v, time_value_and_grad_s=t_vg)
         print(f"{name:<16}{float(value):>14.7e}{t_v * 1e3:>10.2f}ms{t_vg * 1e3:>11.2f}ms",
               flush=True)
