@@ -12,9 +12,9 @@ the high preset's ``overlap_nodes``, so the quadrature's error dominates).
 
 For each method: the relative error against the bank's converged reference on every case;
 the warm time of the value, of ``jax.value_and_grad`` (gradient with respect to the Seidel
-coefficients) and of a batch of 625 designs (``vmap``; a 25 x 25 grid in ``w020`` and
-``w222`` around the paper's Fig. 1 point, chunked with ``lax.map(batch_size=...)`` when
-625 at once would not fit in memory); and the compile times. Writes
+coefficients) and of a batch of 625 designs (``lax.map`` one design at a time, as ``sweep``
+runs on CPU; a 25 x 25 grid in ``w020`` and ``w222`` around the paper's Fig. 1 point); and
+the compile times. The adaptive default is also timed on every bank case, by tier. Writes
 ``benchmarks/results/accuracy_speed{,_quick}.json``, ``.md`` and ``_pareto.png``, and prints
 the two headline ratios of issue 3.
 """
@@ -126,11 +126,16 @@ def batch_designs(n: int):
 
 
 def _batch_function(method, field, u, signal, noise, chunk):
+    """A batch of designs as ``sweep`` runs it on CPU: ``lax.map`` one design at a time
+    (``chunk == 1``, no ``vmap``, so the default's tier switch runs one tier per design), or
+    ``vmap`` over ``chunk`` designs at a time."""
     def one(aberrations):
         return method.fn(aberrations, field, u, signal, noise)
 
     def batch(aberrations):
         n = jax.tree_util.tree_leaves(aberrations)[0].shape[0]
+        if chunk == 1:
+            return jax.lax.map(one, aberrations)
         if chunk >= n:
             return jax.vmap(one)(aberrations)
         return jax.lax.map(one, aberrations, batch_size=chunk)
@@ -183,11 +188,7 @@ def measure(method: Method, cases, timing_case, settings) -> dict:
     while n > 5 and n * value["warm_s"] > settings["batch_budget_s"]:
         n //= 5
     n = min(n, settings["batch_max"])
-    per_design = value["temp_bytes"] or 0
-    chunk = n
-    while chunk > 1 and chunk * per_design > BATCH_MEMORY_BYTES:
-        chunk //= 5
-    chunk = max(chunk, 1)
+    chunk = 1  # as sweep on CPU: one design at a time is fastest there
     _, field, u, signal, noise = args
     expected = n * value["warm_s"]
     batch = common.time_compiled(_batch_function(method, field, u, signal, noise, chunk),
@@ -205,6 +206,39 @@ def measure(method: Method, cases, timing_case, settings) -> dict:
 # --------------------------------------------------------------------------------------
 # Headline ratios, table, plot
 # --------------------------------------------------------------------------------------
+
+
+def default_by_tier(cases) -> dict:
+    """Warm time of the adaptive default's value and value_and_grad on every bank case,
+    grouped by the tier its ``aberration_strength`` selects (the headline times use Fig. 1
+    only, which lies in the middle tier)."""
+    from jmse_jax._merit import _tier_index
+
+    value_fn = _jmse()
+    vag_fn = jax.value_and_grad(value_fn, argnums=0)
+    per_case = {}
+    for case in cases:
+        ab, field, u = case.arguments[:3]
+        strength = float(jj.aberration_strength(ab, field, u))
+        tier = int(_tier_index(strength, u, jj.DEFAULT_TIERS))
+        value = common.time_compiled(value_fn, case.arguments, budget_s=0.3, max_repeats=5)
+        vag = common.time_compiled(vag_fn, case.arguments, budget_s=0.3, max_repeats=5)
+        per_case[case.name] = dict(strength=strength, tier=tier, value_s=value["warm_s"],
+                                   value_and_grad_s=vag["warm_s"])
+        print(f"  default on {case.name:34s} strength {strength:6.2f} tier {tier} "
+              f"value {common.fmt_seconds(value['warm_s'])} vag "
+              f"{common.fmt_seconds(vag['warm_s'])}", flush=True)
+    tiers = {}
+    for tier in sorted({row["tier"] for row in per_case.values()}):
+        rows = [row for row in per_case.values() if row["tier"] == tier]
+        tiers[str(tier)] = dict(
+            cases=len(rows), grid=jj.DEFAULT_TIERS[tier][2],
+            value_s_median=statistics.median(r["value_s"] for r in rows),
+            value_and_grad_s_median=statistics.median(r["value_and_grad_s"] for r in rows))
+    return dict(per_case=per_case, tiers=tiers,
+                value_s_mean=statistics.fmean(r["value_s"] for r in per_case.values()),
+                value_and_grad_s_mean=statistics.fmean(r["value_and_grad_s"]
+                                                       for r in per_case.values()))
 
 
 def headlines(rows) -> dict:
@@ -278,8 +312,9 @@ def markdown(report) -> str:
         f"Bank: {len(report['cases'])} cases, {report['converged_cases']} with a converged "
         f"reference (worst/median error over those); reference convergence up to "
         f"{_e(report['reference_convergence_max'])}. Times are warm medians of one evaluation "
-        f"on the Fig. 1 case; batch = {BATCH_SIZE} designs (vmap; `*` extrapolated from the "
-        "timed sub-batch); value_and_grad is with respect to the Seidel coefficients.",
+        f"on the Fig. 1 case; batch = {BATCH_SIZE} designs (`lax.map`, one design at a time "
+        "as `sweep` runs on CPU; `*` extrapolated from the timed sub-batch); value_and_grad "
+        "is with respect to the Seidel coefficients.",
         "",
     ]
     h = report["headlines"]
@@ -319,6 +354,22 @@ def markdown(report) -> str:
         lines.append(f"3. value_and_grad / value for the default: "
                      f"**{h['default_value_and_grad_over_value']:.2f}** (target ≤ 2.5).")
         lines.append("")
+    tiered = report.get("default_by_tier")
+    if tiered:
+        lines += ["## The adaptive default by tier", "",
+                  "The default picks its grid from `aberration_strength` (`DEFAULT_TIERS`); "
+                  "the headline times are those of Fig. 1 (middle tier). Every bank case:", "",
+                  "| tier | grid | cases | value (median) | value_and_grad (median) |",
+                  "|---|---|---|---|---|"]
+        for tier, row in tiered["tiers"].items():
+            grid = row["grid"]
+            lines.append(f"| {tier} | nodes {grid['nodes']}, se {grid['se_nodes']}, overlap "
+                         f"{grid['overlap_nodes']} | {row['cases']} "
+                         f"| {common.fmt_seconds(row['value_s_median'])} "
+                         f"| {common.fmt_seconds(row['value_and_grad_s_median'])} |")
+        lines += ["", f"Mean over the bank: value "
+                  f"{common.fmt_seconds(tiered['value_s_mean'])}, value_and_grad "
+                  f"{common.fmt_seconds(tiered['value_and_grad_s_mean'])}.", ""]
     lines += ["## All methods", "",
               "| method | OTF nodes/quadrant | worst rel. error | median | worst case | value | "
               "value_and_grad (×) | batch of 625 (per design) | compile value / vag / batch |",
@@ -429,6 +480,10 @@ def run(quick: bool = False, only: list[str] | None = None) -> dict:
               f"{'*' if row['batch_625_extrapolated'] else ''}"
               f"  compile {common.fmt_seconds(row['compile_s'])}  "
               f"[{time.perf_counter() - t0:.0f} s]", flush=True)
+    tiered = None
+    if not only or any("default" in word for word in only):
+        print("the adaptive default on every bank case ...", flush=True)
+        tiered = default_by_tier(cases)
     converged = [c for c in cases if c.converged]
     report = dict(
         description="Accuracy and speed of every JMSE method on the tests' problem bank",
@@ -437,7 +492,7 @@ def run(quick: bool = False, only: list[str] | None = None) -> dict:
         timing_case=timing_case.name,
         cases=[c.describe() for c in cases], converged_cases=len(converged),
         reference_convergence_max=max((c.convergence for c in converged), default=None),
-        methods=rows, headlines=headlines(rows),
+        methods=rows, headlines=headlines(rows), default_by_tier=tiered,
         load_at_end=common.load_average(), seconds=time.perf_counter() - start,
     )
     suffix = "_quick" if quick else ""

@@ -47,7 +47,8 @@ def _parse_args(argv=None):
     parser.add_argument("--fields", default="0.0,0.7,0.95", help="field heights, comma separated")
     parser.add_argument("--devices", default="1,2,4", help="device counts, comma separated")
     parser.add_argument("--modes", default="value,grad", help="value and/or grad")
-    parser.add_argument("--batch-size", type=int, default=16, help="designs per device per vmap")
+    parser.add_argument("--batch-size", type=int, default=None,
+                        help="designs per device per vmap (default: sweep's, 1 on CPU)")
     parser.add_argument("--repeats", type=int, default=1,
                         help="sweeps per configuration; the fastest run is reported")
     parser.add_argument("--timeout", type=float, default=1800.0,
@@ -113,13 +114,13 @@ def _worker(args) -> dict:
         "platform": best["platform"],
         "n_designs": n,
         "padded_designs": best["padded_designs"],
-        "batch_size": args.batch_size,
+        "batch_size": best["batch_size"],
         "compile_s": [m["compile_s"] for m in runs],
         "run_s": [m["run_s"] for m in runs],
         "designs_per_second": n / best["run_s"],
         "status_counts": result.status_counts(),
         "xla_temp_bytes_per_device": memory.get("temp_bytes"),
-        "xla_temp_bytes_per_design": (memory["temp_bytes"] / args.batch_size
+        "xla_temp_bytes_per_design": (memory["temp_bytes"] / best["batch_size"]
                                       if memory.get("temp_bytes") is not None else None),
         "peak_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
     }
@@ -133,7 +134,9 @@ def _run_configuration(args, n_devices: int, mode: str) -> dict:
     env["XLA_FLAGS"] = " ".join(flags)
     command = [sys.executable, str(Path(__file__).resolve()), "--worker", "--mode", mode,
                "--preset", args.preset, "--grid", str(args.grid), "--fields", args.fields,
-               "--batch-size", str(args.batch_size), "--repeats", str(args.repeats)]
+               "--repeats", str(args.repeats)]
+    if args.batch_size is not None:
+        command += ["--batch-size", str(args.batch_size)]
     for item in args.option:
         command += ["--option", item]
     started = time.perf_counter()
@@ -213,7 +216,8 @@ def main(argv=None) -> None:
         ),
         "preset": args.preset,
         "options": _options(args),
-        "batch_size": args.batch_size,
+        "batch_size": (args.batch_size if args.batch_size is not None
+                       else next((r["batch_size"] for r in rows if "batch_size" in r), None)),
         "machine": machine,
         "rows": rows,
     }

@@ -14,7 +14,9 @@ from ._aberrations import (
     wavefront as wavefront,
 )
 from ._merit import (
+    DEFAULT_TIERS as DEFAULT_TIERS,
     PRESETS as PRESETS,
+    aberration_strength as aberration_strength,
     baseline_jmse as baseline_jmse,
     jmse as jmse,
     jmse_options as jmse_options,

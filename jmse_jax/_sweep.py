@@ -3,8 +3,9 @@
 One code path serves a laptop, a GPU and many accelerators: the batch axis is laid on a 1-D
 device mesh (``jax.sharding.Mesh`` over every device, across hosts after
 ``jax.distributed.initialize``); each device evaluates its share with
-``lax.map(..., batch_size=batch_size)``, i.e. ``vmap`` over ``batch_size`` designs at a time,
-so memory stays bounded however large the sweep. Results come back to the host in input
+``lax.map(..., batch_size=batch_size)``, i.e. ``vmap`` over ``batch_size`` designs at a time
+(on CPU one design at a time by default, which is fastest there), so memory stays bounded
+however large the sweep. Results come back to the host in input
 order, with the inputs kept beside them and a status per design.
 """
 
@@ -31,6 +32,9 @@ from ._merit import U_MAX, jmse, jmse_options
 from ._numerics import check_count
 
 __all__ = ["SweepResult", "SweepStatus", "hypercube", "sweep", "sweep_jmse"]
+
+#: Default ``batch_size`` of ``sweep`` on GPU and TPU (on CPU the default is 1).
+DEFAULT_ACCELERATOR_BATCH = 16
 
 #: Name of the mesh axis along which designs are sharded.
 MESH_AXIS = "designs"
@@ -368,7 +372,7 @@ def sweep(
     grad: bool = False,
     has_aux: bool = False,
     valid: Callable | None = None,
-    batch_size: int = 16,
+    batch_size: int | None = None,
     chunks_per_call: int = 1,
     devices: int | Sequence | None = None,
     progress: bool | None = None,
@@ -400,8 +404,13 @@ def sweep(
         ``fn`` returns ``(value, aux)``; ``aux`` (a pytree of arrays) is kept per design.
     valid : callable ``design -> bool``, optional
         Traceable predicate; designs for which it is False get ``SweepStatus.INVALID``.
-    batch_size : int >= 1
-        Designs evaluated together (one ``vmap``) on each device. Memory per device is
+    batch_size : int >= 1, optional
+        Designs evaluated together (one ``vmap``) on each device. Default: 1 on CPU, where
+        ``jmse`` is fastest one design at a time (a ``vmap`` of many designs multiplies
+        its working set past the caches: 2-3x slower per design, measured in
+        ``benchmarks/sweep_bench.py``), and ``DEFAULT_ACCELERATOR_BATCH`` on GPU/TPU.
+        With ``batch_size=1`` the designs go through ``lax.map`` without ``vmap``, so
+        data-dependent branches (``lax.cond``) stay branches. Memory per device is
         about ``batch_size`` times the memory of one design in flight, which
         ``result.metadata["memory"]["temp_bytes"] / batch_size`` reports (XLA's temporary
         buffers of the compiled sweep). For the singlet lens + ``jmse`` in float64 on CPU
@@ -447,6 +456,9 @@ def sweep(
     """
     if not callable(fn):
         raise ValueError(f"fn must be callable, got {type(fn).__name__}")
+    devices = _resolve_devices(devices)
+    if batch_size is None:
+        batch_size = 1 if devices[0].platform == "cpu" else DEFAULT_ACCELERATOR_BATCH
     check_count("batch_size", batch_size)
     check_count("chunks_per_call", chunks_per_call)
     host_batch, n = _host_batch(batch)
@@ -457,7 +469,6 @@ def sweep(
                     f"grad=True needs floating-point designs; batch{jax.tree_util.keystr(path)} "
                     f"has dtype {leaf.dtype}"
                 )
-    devices = _resolve_devices(devices)
     n_devices = len(devices)
     evaluate = _make_evaluate(fn, grad, has_aux, valid)
 
@@ -489,6 +500,8 @@ def sweep(
     sharding = NamedSharding(mesh, PartitionSpec(MESH_AXIS))
 
     def local_sweep(designs):
+        if batch_size == 1:  # no vmap: a lax.cond in fn then runs one branch only
+            return jax.lax.map(evaluate, designs)
         return jax.lax.map(evaluate, designs, batch_size=batch_size)
 
     # Trace the per-device program once and pass its array constants (quadrature nodes,
@@ -631,7 +644,7 @@ def sweep_jmse(
     *,
     grad: bool = False,
     preset: str = "default",
-    batch_size: int = 16,
+    batch_size: int | None = None,
     chunks_per_call: int = 1,
     devices: int | Sequence | None = None,
     progress: bool | None = None,

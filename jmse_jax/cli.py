@@ -281,7 +281,7 @@ def _cmd_sweep(args) -> int:
     if n > args.max_designs:
         raise UsageError(f"the grid has {n} designs, more than --max-designs "
                          f"{args.max_designs}; lower N or raise --max-designs")
-    if args.batch_size < 1:
+    if args.batch_size is not None and args.batch_size < 1:
         raise UsageError(f"--batch-size must be a positive integer, got {args.batch_size}")
     cube = jj.hypercube(**axes)
     fixed = {k: getattr(args, k) for k in COEFFICIENTS}
@@ -464,7 +464,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_spectra(sw, defaults=True)
     sw.add_argument("--preset", choices=PRESET_NAMES, default="fast", help="jmse preset")
     sw.add_argument("--grad", action="store_true", help="also store the gradients")
-    sw.add_argument("--batch-size", type=int, default=16, help="designs per vmap chunk")
+    sw.add_argument("--batch-size", type=int, default=None,
+                    help="designs per vmap chunk (default: 1 on CPU, 16 on GPU/TPU)")
     sw.add_argument("--max-designs", type=int, default=10000, help="refuse larger grids")
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
     sw.add_argument("--out", default="jmse_output/sweep", help="output folder")

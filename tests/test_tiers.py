@@ -1,0 +1,133 @@
+"""The adaptive default preset: aberration strength, tier choice, and its derivative rule."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from compiled import jmse_fn
+
+import jmse_jax as jj
+from jmse_jax._merit import _strength, _tier_index
+
+SIGNAL, NOISE = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+
+# One design per tier: nearly diffraction limited, the paper's Fig. 1, every term at 5 waves.
+DESIGNS = [
+    (jj.Seidel(w020=0.3, w222=0.2), 0.5, 0.2, 0),
+    (jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198), 0.95, 0.2, 1),
+    (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 0.8, 0.2, 2),
+]
+
+
+@pytest.mark.parametrize("a, u", [(1.0, 0.5), (-3.0, 0.2), (2.0, 1.2)])
+def test_strength_of_defocus_is_analytic(a, u):
+    # W = a rho^2: |grad W| = 2 |a| rho, largest on the rim (sampled exactly).
+    value = float(jj.aberration_strength(jj.Seidel(w020=a), 0.0, u))
+    assert value == pytest.approx(2 * abs(a) * min(math.sqrt(2) * u, 1.0), rel=1e-12)
+
+
+def test_strength_of_coma_is_analytic_and_ignores_tilt():
+    # Coma less its hidden tilt: W = c (rho^2 y - 2 y / 3), grad = c (2xy, x^2 + 3y^2 - 2/3),
+    # largest at (0, +-1): |c| 7/3. Distortion and tilt add nothing.
+    c = 0.8 * 1.5
+    value = float(jj.aberration_strength(jj.Seidel(w131=1.5, w311=4.0, w111=-2.0), 0.8, 0.3))
+    assert value == pytest.approx(abs(c) * 7 / 3 * math.sqrt(2) * 0.3, rel=1e-12)
+
+
+def test_strength_has_zero_gradient_and_validates():
+    grad = jax.grad(lambda w: _strength(jj.Seidel(w020=w), 0.0, 0.2))(1.0)
+    assert float(grad) == 0.0
+    with pytest.raises(ValueError, match="field"):
+        jj.aberration_strength(jj.Seidel(), 1.5, 0.2)
+    with pytest.raises(ValueError, match="u"):
+        jj.aberration_strength(jj.Seidel(), 0.5, -0.1)
+
+
+def test_tier_index_honours_both_bounds():
+    tiers = jj.DEFAULT_TIERS
+    assert int(_tier_index(0.5, 0.2, tiers)) == 0
+    assert int(_tier_index(0.5, 0.8, tiers)) == 1  # a band reaching the cutoff skips tier 0
+    assert int(_tier_index(3.0, 0.2, tiers)) == 1
+    assert int(_tier_index(50.0, 0.2, tiers)) == 2
+    assert [t[0] for t in tiers] == sorted(t[0] for t in tiers) and tiers[-1][0] == math.inf
+
+
+@pytest.mark.parametrize("ab, field, u, tier", DESIGNS)
+def test_default_equals_its_tier_grid(ab, field, u, tier):
+    """Eager, jit, value_and_grad and forward mode all run the tier the strength selects."""
+    strength = float(jj.aberration_strength(ab, field, u))
+    assert int(_tier_index(strength, u, jj.DEFAULT_TIERS)) == tier
+    grid = jj.DEFAULT_TIERS[tier][2]
+    expected, expected_grad = jax.jit(jax.value_and_grad(
+        lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **grid)))(ab)
+    eager = jj.jmse(ab, field, u, SIGNAL, NOISE)
+    jitted = jmse_fn()(ab, field, u, SIGNAL, NOISE)
+    value, gradient = _default_value_and_grad(ab, field, u)
+    np.testing.assert_allclose([eager, jitted, value], float(expected), rtol=1e-13)
+    for name in ("w020", "w040", "w131", "w222", "w220"):
+        np.testing.assert_allclose(getattr(gradient, name), getattr(expected_grad, name),
+                                   rtol=1e-10, atol=1e-16)
+    # Forward mode: d/dt jmse(w020 + t) equals the reverse-mode gradient.
+    _, tangent = _default_jvp_w020(ab, field, u)
+    np.testing.assert_allclose(tangent, gradient.w020, rtol=1e-10)
+
+
+@jax.jit
+def _default_value_and_grad(ab, field, u):
+    return jax.value_and_grad(lambda a: jj.jmse(a, field, u, SIGNAL, NOISE))(ab)
+
+
+@jax.jit
+def _default_jvp_w020(ab, field, u):
+    def along(t):
+        return jj.jmse(jj.Seidel(**{**_coefficients(ab), "w020": ab.w020 + t}), field, u,
+                       SIGNAL, NOISE)
+    return jax.jvp(along, (0.0,), (1.0,))
+
+
+def _coefficients(ab):
+    return {k: getattr(ab, k) for k in ("w020", "w040", "w131", "w222", "w220", "w311", "w111")}
+
+
+def test_default_gradient_matches_finite_differences_in_the_top_tier():
+    ab, field, u, _ = DESIGNS[2]
+    grad = _default_value_and_grad(ab, field, u)[1].w040
+    h = 1e-4
+    f = [float(jmse_fn()(jj.Seidel(**{**_coefficients(ab), "w040": 5.0 + s * h}), field, u,
+                         SIGNAL, NOISE)) for s in (1, -1)]
+    assert float(grad) == pytest.approx((f[0] - f[1]) / (2 * h), rel=1e-6)
+
+
+def test_vmap_over_designs_in_different_tiers():
+    abs_ = [d[0] for d in DESIGNS]
+    batch = jax.tree_util.tree_map(lambda *x: jnp.stack([jnp.asarray(v, jnp.float64) for v in x]),
+                                   *[jj.Seidel(**_coefficients(a)) for a in abs_])
+    field = jnp.asarray([d[1] for d in DESIGNS])
+    values = jax.jit(jax.vmap(lambda a, f: jj.jmse(a, f, 0.2, SIGNAL, NOISE)))(batch, field)
+    singles = [float(jmse_fn()(a, f, 0.2, SIGNAL, NOISE)) for a, f, _, _ in DESIGNS]
+    np.testing.assert_allclose(values, singles, rtol=1e-12)
+
+
+def test_grid_override_fixes_the_grid():
+    options = jj.jmse_options("default", nodes=(16, 8))
+    assert options["tiers"] is None and options["se_nodes"] == (1200, 192)
+    assert jj.jmse_options("default")["tiers"] is jj.DEFAULT_TIERS
+    assert jj.jmse_options("fast")["tiers"] is None
+    with pytest.raises(ValueError, match="unknown jmse option 'tiers'"):
+        jj.jmse_options("default", tiers=None)
+
+
+def test_sweep_runs_designs_one_by_one_on_cpu_and_equals_the_loop():
+    w020 = np.array([0.3, -2.75, 5.0])
+    ab = jj.Seidel(w020=w020, w040=np.array([0.0, 1.5578, 5.0]),
+                   w131=np.array([0.0, -1.2602, 5.0]), w222=np.array([0.2, 1.4089, 5.0]),
+                   w220=np.array([0.0, 2.7198, 5.0]))
+    field = np.array([0.5, 0.95, 0.8])
+    result = jj.sweep_jmse(ab, field, 0.2, SIGNAL, NOISE, progress=False)
+    assert result.metadata["batch_size"] == 1
+    loop = [float(jmse_fn()(a, f, 0.2, SIGNAL, NOISE)) for a, f, _, _ in DESIGNS]
+    np.testing.assert_allclose(result.value, loop, rtol=1e-12)
