@@ -63,9 +63,9 @@ _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes
 
 #: Named accuracy/speed settings of ``jmse``. ``nodes`` are OTF nodes per polar triangle
 #: (radial, angular), ``se_nodes`` the finer nodes on which the OTF is interpolated and
-#: ``S_e`` integrated, ``overlap_nodes`` the per-frequency autocorrelation rule. ``tiers`` (``"default"`` only)
-#: adapts the grid to the aberration strength; the fixed grid listed with it is the middle
-#: tier's, used when a grid option is overridden.
+#: ``S_e`` integrated, ``overlap_nodes`` the per-frequency autocorrelation rule.
+#: ``tiers`` (``"default"`` only) adapts the grid to the aberration strength; the fixed grid
+#: listed with it is the middle tier's, used when a grid option is overridden.
 PRESETS: dict[str, dict] = {
     "fast": dict(
         quadrature="polar", nodes=(24, 16), se_nodes=(400, 240), otf_method="overlap",
