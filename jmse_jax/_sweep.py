@@ -445,6 +445,13 @@ def sweep(
     bit for bit in the tests, gradients to a few ulp. Another ``batch_size`` or
     ``chunks_per_call`` may also change the last bits.
 
+    Several hosts: start every process with ``jax.distributed.initialize(...)`` (on CPU also
+    ``jax.config.update("jax_cpu_collectives_implementation", "gloo")``), then call ``sweep``
+    with the same arguments everywhere; the mesh spans every process's devices. The tests
+    run two processes of 2 fake CPU devices each (``tests/sweep_hosts_worker.py``): both
+    receive the same result bit for bit, with values equal bit for bit to one process with
+    4 devices and gradients to a few ulp.
+
     Examples
     --------
     >>> import jax, numpy as np
