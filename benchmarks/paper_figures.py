@@ -142,50 +142,8 @@ def fig4_right(quick, cases_by_name):
 
 
 def plot_fig4_right(data, path):
-    import matplotlib.pyplot as plt
-
-    ps = data["ps"]
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex=True)
-    for column, (defocus, block) in enumerate(data["defocus"].items()):
-        top, bottom = axes[0, column], axes[1, column]
-        for i, rule in enumerate(data["rules"]):
-            style = dict(color=f"C{i}", marker="os^Dv"[i % 5], markersize=4,
-                         linewidth=2.0 if rule == "polar" else 1.2)
-            row = block["rules"][rule]
-            top.plot(ps, [row["jmse"][str(p)] for p in ps], label=RULE_LABELS[rule], **style)
-            bottom.plot(ps, [max(row["relative_error"][str(p)], 1e-16) for p in ps], **style)
-        top.axhline(block["reference"], color="k", linestyle="--", linewidth=1,
-                    label="converged value")
-        for j, (preset, entry) in enumerate(block["presets"].items()):
-            if entry["otf_nodes_per_quadrant"]:
-                # Plotted at the p whose p**2 equals the preset's OTF nodes per quadrant.
-                p_equiv = math.sqrt(entry["otf_nodes_per_quadrant"])
-                style = dict(marker="*", markersize=13, color=f"C{6 + j}", linestyle="none",
-                             markeredgecolor="k", label=f"preset {preset} (polar + OTF "
-                             "interpolation)")
-                top.plot([p_equiv], [entry["jmse"]], **style)
-                bottom.plot([p_equiv], [max(entry["relative_error"], 1e-16)], **style)
-        reference = block["reference"]
-        spread = [block["rules"][r]["jmse"][str(p)] for r in data["rules"] for p in ps
-                  if p >= 8]
-        low, high = min(spread + [reference]), max(spread + [reference])
-        margin = 0.1 * (high - low) + 1e-3 * abs(reference)
-        top.set_ylim(low - margin, high + margin)
-        top.set_title(f"defocus w020 = {float(defocus):g} waves (Fig. 1 aberrations, u = 0.2)")
-        top.set_ylabel("JMSE")
-        top.grid(alpha=0.3)
-        for t in THRESHOLDS:
-            bottom.axhline(t, color="0.5", linestyle=":", linewidth=1)
-        bottom.set_yscale("log")
-        bottom.set_xscale("log", base=2)
-        bottom.set_xlabel("p (nodes per axis per quadrant; p² OTF nodes per quadrant)")
-        bottom.set_ylabel("relative error")
-        bottom.grid(alpha=0.3, which="both")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle("Berkner & Shroff Fig. 4 (right): JMSE versus frequency nodes")
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    """The package's Fig. 4 (right) plot, with the presets marked as stars."""
+    reproduce.plot_fig4_right(data, path, dpi=130)
 
 
 # --------------------------------------------------------------------------------------

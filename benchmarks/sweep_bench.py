@@ -3,10 +3,10 @@
 The sweep: Berkner & Shroff's F/4.6 singlet space (``jmse_jax.lens.paper_singlet``), stop
 distance 0..3 mm x front curvature -0.1..0.1 1/mm on a ``grid x grid`` lattice (25 x 25 in
 the paper), times a few field heights (3 by default), ``u = 0.2``, ``MarkovSignal(1, 5)``,
-``WhiteNoise(1e-3)``, in float64. Each design traces the lens, converts its Seidel sums to
-waves and evaluates ``jmse``; ``value_and_grad`` differentiates with respect to stop
-distance, front curvature and field. Non-physical lenses get ``SweepStatus.INVALID``
-through ``lens_status``.
+``WhiteNoise(1e-3)``, in float64 (``--dtype float32``: in float32). Each design traces the
+lens, converts its Seidel sums to waves and evaluates ``jmse``; ``value_and_grad``
+differentiates with respect to stop distance, front curvature and field. Non-physical
+lenses get ``SweepStatus.INVALID`` through ``lens_status``.
 
 Every configuration (device count x mode) runs in its own process, so that JAX can be
 given the device count (``--xla_force_host_platform_device_count``) and so that its memory
@@ -18,6 +18,7 @@ Usage (from the repository root)::
     python benchmarks/sweep_bench.py                       # default preset, 25 x 25 x 3
     python benchmarks/sweep_bench.py --preset fast --grid 10 --devices 1,2,4
     python benchmarks/sweep_bench.py --option nodes=[12,8] --option overlap_nodes=[24,24]
+    python benchmarks/sweep_bench.py --preset fast --dtype float32 --tag fast_float32
 
 Writes ``benchmarks/results/sweep_bench.json`` and ``sweep_bench.md`` (``--tag`` adds a
 suffix to both names).
@@ -53,6 +54,10 @@ def _parse_args(argv=None):
                         help="sweeps per configuration; the fastest run is reported")
     parser.add_argument("--timeout", type=float, default=1800.0,
                         help="seconds allowed per configuration")
+    parser.add_argument("--dtype", default="float64", choices=("float64", "float32"),
+                        help="dtype of the designs, hence of the whole computation; float32 "
+                             "runs also report their largest relative difference from "
+                             "float64 on one device")
     parser.add_argument("--tag", default="", help="suffix of the output file names")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--mode", help=argparse.SUPPRESS)
@@ -89,6 +94,7 @@ def _worker(args) -> dict:
         front_curvature=np.linspace(*space["front_curvature_range"], args.grid),
         field=np.asarray(fields),
     )
+    designs = {key: value.astype(args.dtype) for key, value in designs.items()}
 
     def merit(design):
         singlet = lens.paper_singlet(design["stop_distance"], design["front_curvature"])
@@ -105,6 +111,13 @@ def _worker(args) -> dict:
                           batch_size=args.batch_size, progress=False)
         runs.append(result.metadata)
     best = min(runs, key=lambda m: m["run_s"])
+    float64_difference = None
+    if args.dtype != "float64" and jax.device_count() == 1:  # accuracy of the cheaper dtype
+        reference = jj.sweep(merit, {k: v.astype(np.float64) for k, v in designs.items()},
+                             valid=physical, batch_size=args.batch_size, progress=False)
+        ok = result.ok & reference.ok
+        float64_difference = float(np.max(np.abs(
+            result.value[ok].astype(np.float64) / reference.value[ok] - 1.0)))
     n = best["n_designs"]
     memory = best["memory"] or {}
     return {
@@ -119,6 +132,8 @@ def _worker(args) -> dict:
         "run_s": [m["run_s"] for m in runs],
         "designs_per_second": n / best["run_s"],
         "status_counts": result.status_counts(),
+        "dtype": args.dtype,
+        "max_rel_diff_from_float64": float64_difference,
         "xla_temp_bytes_per_device": memory.get("temp_bytes"),
         "xla_temp_bytes_per_design": (memory["temp_bytes"] / best["batch_size"]
                                       if memory.get("temp_bytes") is not None else None),
@@ -134,7 +149,7 @@ def _run_configuration(args, n_devices: int, mode: str) -> dict:
     env["XLA_FLAGS"] = " ".join(flags)
     command = [sys.executable, str(Path(__file__).resolve()), "--worker", "--mode", mode,
                "--preset", args.preset, "--grid", str(args.grid), "--fields", args.fields,
-               "--repeats", str(args.repeats)]
+               "--repeats", str(args.repeats), "--dtype", args.dtype]
     if args.batch_size is not None:
         command += ["--batch-size", str(args.batch_size)]
     for item in args.option:
@@ -161,7 +176,8 @@ def _markdown(report: dict) -> str:
         "",
         f"- machine: {machine.get('cpu_model')} ({machine.get('cpu_count')} CPUs), "
         f"{machine.get('platform')}",
-        f"- jax {machine.get('jax_version')}, dtype float64, commit {machine.get('commit')}"
+        f"- jax {machine.get('jax_version')}, dtype {report.get('dtype', 'float64')}, "
+        f"commit {machine.get('commit')}"
         f"{' (with uncommitted changes)' if machine.get('dirty') else ''}",
         f"- load average at start: {machine.get('load_at_start', {}).get('uptime')}",
         f"- jmse preset {report['preset']!r}, options {report['options']}, "
@@ -185,6 +201,11 @@ def _markdown(report: dict) -> str:
             f"| {'' if per_design is None else f'{per_design / 1e6:.1f}'} "
             f"| {row['peak_rss_bytes'] / 1e6:.0f} | {row['status_counts']} |"
         )
+    for row in report["rows"]:
+        if row.get("max_rel_diff_from_float64") is not None:
+            lines.append(f"\n{row['mode']}, {row['n_devices']} device: largest relative "
+                         f"difference of the {row['dtype']} values from float64 "
+                         f"{row['max_rel_diff_from_float64']:.1e}.")
     lines += ["", "`run s` excludes compilation (the executable is compiled ahead of time; "
               "`compile s` is that step). XLA temp MB/design is XLA's temporary-buffer size "
               "of the compiled sweep per device divided by `batch_size`: the memory to budget "
@@ -215,6 +236,7 @@ def main(argv=None) -> None:
             f"x field {args.fields}, u = 0.2, MarkovSignal(1, 5), WhiteNoise(1e-3)."
         ),
         "preset": args.preset,
+        "dtype": args.dtype,
         "options": _options(args),
         "batch_size": (args.batch_size if args.batch_size is not None
                        else next((r["batch_size"] for r in rows if "batch_size" in r), None)),

@@ -239,8 +239,12 @@ def fig4_right(ps: Sequence[int], defocus_values=(-6.0, -2.75), reference_preset
     return out
 
 
-def plot_fig4_right(data, path):
-    """Two columns (one per defocus): JMSE versus p on top, relative error below."""
+def plot_fig4_right(data, path, dpi: int = 110):
+    """Two columns (one per defocus): JMSE versus p on top, relative error below.
+
+    A defocus block with ``"presets"`` (``{name: {"jmse", "relative_error",
+    "otf_nodes_per_quadrant"}}``) also gets a star per preset, at the ``p`` whose ``p**2``
+    equals the preset's OTF nodes per quadrant."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -259,6 +263,14 @@ def plot_fig4_right(data, path):
             bottom.plot(ps, [max(row["relative_error"][str(p)], 1e-16) for p in ps], **style)
         reference = block["reference"]
         top.axhline(reference, color="k", linestyle="--", linewidth=1, label="converged value")
+        for j, (preset, entry) in enumerate(block.get("presets", {}).items()):
+            if entry.get("otf_nodes_per_quadrant"):
+                p_equiv = math.sqrt(entry["otf_nodes_per_quadrant"])
+                style = dict(marker="*", markersize=13, color=f"C{6 + j}", linestyle="none",
+                             markeredgecolor="k",
+                             label=f"preset {preset} (polar + OTF interpolation)")
+                top.plot([p_equiv], [entry["jmse"]], **style)
+                bottom.plot([p_equiv], [max(entry["relative_error"], 1e-16)], **style)
         spread = [block["rules"][r]["jmse"][str(p)] for r in data["rules"] for p in ps
                   if p >= 8] or [reference]
         low, high = min(spread + [reference]), max(spread + [reference])
@@ -277,7 +289,7 @@ def plot_fig4_right(data, path):
     axes[0, 0].legend(fontsize=7)
     fig.suptitle("Berkner & Shroff Fig. 4 (right): JMSE versus frequency nodes")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
 
 

@@ -20,8 +20,9 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_cpu_collectives_implementation", "gloo")
 
-import jmse_jax as jj  # noqa: E402
 from sweep_devices_worker import CHEAP, designs  # noqa: E402
+
+import jmse_jax as jj  # noqa: E402
 
 
 def main(process_id: int, port: int, out_dir: Path) -> None:
