@@ -35,24 +35,20 @@ Writes to ``benchmarks/results/`` (``_quick`` suffix for ``--quick``):
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 
 import _common as common
-import numpy as np
 
 import jmse_jax as jj
 from jmse_jax import _reproduce as reproduce
-from jmse_jax._reproduce import first_stays_below, jmse_versus_nodes
-
-PAPER_RULES = ("rectangle", "trapezoid", "gauss", "gauss_polar")
-RULE_LABELS = {"rectangle": "rectangle", "trapezoid": "trapezoid", "gauss": "Gauss ⊗ Gauss",
-               "gauss_polar": "Gauss radial × trapezoid angular",
-               "polar": "polar Gauss panels (ours)"}
-THRESHOLDS = (1e-3, 1e-6)
-WAVE_TENTH = 0.1
-
+from jmse_jax._reproduce import (
+    PAPER_RULES,
+    RULE_LABELS,
+    THRESHOLDS,
+    first_stays_below,
+    jmse_versus_nodes,
+)
 
 # --------------------------------------------------------------------------------------
 # Fig. 4 right: JMSE versus the number of frequency nodes
@@ -151,140 +147,16 @@ def plot_fig4_right(data, path):
 # --------------------------------------------------------------------------------------
 
 
-def _hypercube_sample(n, seed):
-    from scipy.stats import qmc
-
-    unit = qmc.LatinHypercube(d=5, seed=seed).random(n)
-    return -6.0 + 12.0 * unit  # (n, 5): w020, w040, w131, w222, w220
-
-
-def _resolvable_noll(rings, arms):
-    """Noll indices 1 ... 15 (radial order <= 4) that a rings x arms polar grid resolves."""
-    keep = []
-    for j in range(1, 16):
-        n, m = jj.noll_to_nm(j)
-        if n <= 2 * rings - 1 and 2 * abs(m) < arms:
-            keep.append(j)
-    return tuple(keep)
-
-
 def opd_error(quick, seed=20240607):
-    from scipy.interpolate import CloughTocher2DInterpolator, NearestNDInterpolator
-
-    n_designs = 8 if quick else 64
-    rings_list = (2, 3, 4, 6, 8) if quick else tuple(range(2, 11))
-    arms_list = ((4, 6, 8, 10, 16, 24, 40) if quick
-                 else tuple(range(4, 12)) + tuple(range(12, 41, 2)))
-    coefficients = _hypercube_sample(n_designs, seed)
-    keys = ("w020", "w040", "w131", "w222", "w220")
-    # NumPy coefficient columns: the Seidel polynomial then evaluates in NumPy (fast on host).
-    aberrations = jj.Seidel(**{k: coefficients[:, i, None] for i, k in enumerate(keys)})
-    field = common.FIG1_FIELD
-    reference_grid = jj.SquareGrid(64)
-    inside = reference_grid.weights > 0
-    x_ref, y_ref = reference_grid.x[inside], reference_grid.y[inside]
-    opd_ref = np.asarray(aberrations(x_ref[None, :], y_ref[None, :], field))
-
-    def rms(approx):  # (n_designs, points) -> mean over designs of the RMS over the disc
-        return float(np.mean(np.sqrt(np.mean((approx - opd_ref) ** 2, axis=1))))
-
-    # Zernike projection c_j = (1/pi) sum_i w_i W_i Z_j(x_i, y_i), zernike_fit's quadrature,
-    # as one matrix per grid; the 15 polynomials (n <= 4) are evaluated once, through the
-    # public Zernike model, at the union of every grid's points and at the reference cells.
-    grids = {(r, a): jj.PolarGrid(r, a) for r in rings_list for a in arms_list}
-    all_x = np.concatenate([x_ref] + [g.x.ravel() for g in grids.values()])
-    all_y = np.concatenate([y_ref] + [g.y.ravel() for g in grids.values()])
-    basis_all = np.stack([np.asarray(jj.wavefront(jj.Zernike(np.eye(15)[q]), all_x, all_y))
-                          for q in range(15)])  # (15, points), Noll 1 .. 15
-    basis_ref = basis_all[:, : x_ref.size]
-    offsets = np.cumsum([x_ref.size] + [g.size for g in grids.values()])
-    basis_at = {key: basis_all[:, start:stop]
-                for key, start, stop in zip(grids, offsets[:-1], offsets[1:], strict=True)}
-    checks = {}
-
-    d_cubic = np.full((len(rings_list), len(arms_list)), np.nan)
-    d_zernike = np.full_like(d_cubic, np.nan)
-    start = time.perf_counter()
-    for i, rings in enumerate(rings_list):
-        for k, arms in enumerate(arms_list):
-            grid = grids[rings, arms]
-            xs, ys = grid.x.ravel(), grid.y.ravel()
-            samples = np.asarray(aberrations(xs[None, :], ys[None, :], field))  # (n, L K)
-            points = np.column_stack([xs, ys])
-            # tol 1e-4 on the gradient estimate: 3-10x faster, d_Omega unchanged to 1e-7.
-            cubic = CloughTocher2DInterpolator(points, samples.T, tol=1e-4)(x_ref, y_ref)
-            outside = np.isnan(cubic[:, 0])
-            if np.any(outside):
-                cubic[outside] = NearestNDInterpolator(points, samples.T)(x_ref[outside],
-                                                                          y_ref[outside])
-            d_cubic[i, k] = rms(cubic.T)
-            rows = [j - 1 for j in _resolvable_noll(rings, arms)]
-            projection = (basis_at[rings, arms][rows] * grid.weights.ravel()).T / math.pi
-            fitted = samples @ projection  # (n, terms)
-            d_zernike[i, k] = rms(fitted @ basis_ref[rows])
-            if (rings, arms) in ((6, 40), (3, 10), (10, 40)):
-                # Same numbers as the public zernike_fit (first design)?
-                api = jj.zernike_fit(samples[0].reshape(rings, arms), grid,
-                                     tuple(j + 1 for j in rows)).coefficients
-                checks[f"L={rings},K={arms}"] = float(np.max(np.abs(np.asarray(api)
-                                                                    - fitted[0])))
-    seconds = time.perf_counter() - start
-    def findings(d):
-        ok = d <= WAVE_TENTH
-        fewest = None
-        for i, rings in enumerate(rings_list):
-            for k, arms in enumerate(arms_list):
-                if ok[i, k] and (fewest is None or rings * arms < fewest[0] * fewest[1]):
-                    fewest = (rings, arms)
-        min_arms = {str(r): next((a for k, a in enumerate(arms_list)
-                                  if np.all(ok[i, k:])), None)
-                    for i, r in enumerate(rings_list)}
-        paper = None
-        if 6 in rings_list and 40 in arms_list:
-            paper = float(d[rings_list.index(6), arms_list.index(40)])
-        return dict(fewest_samples=None if fewest is None else dict(
-                        rings=fewest[0], arms=fewest[1], samples=fewest[0] * fewest[1]),
-                    min_arms_per_rings=min_arms, d_at_paper_choice_L6_K40=paper)
-
-    out = dict(n_designs=n_designs, seed=seed, field=field, coefficient_range=[-6.0, 6.0],
-               coefficients=list(keys), reference_grid="64 x 64 cell centres inside the disc",
-               rings=list(rings_list), arms=list(arms_list), units="waves RMS",
-               d_cubic=d_cubic.tolist(), d_zernike=d_zernike.tolist(),
-               zernike_fit_agreement=checks,
-               cubic=findings(d_cubic), zernike=findings(d_zernike), seconds=seconds)
-    print(f"fig4 left ({seconds:.1f} s): cubic needs {out['cubic']['fewest_samples']}, "
-          f"Zernike needs {out['zernike']['fewest_samples']}; at (6, 40): cubic "
-          f"{out['cubic']['d_at_paper_choice_L6_K40']}, Zernike "
-          f"{out['zernike']['d_at_paper_choice_L6_K40']}", flush=True)
-    return out
+    """Fig. 4 (left) through the package (quick: fewer designs and grids)."""
+    if quick:
+        return reproduce.opd_error(8, (2, 3, 4, 6, 8), (4, 6, 8, 10, 16, 24, 40), seed,
+                                   common.FIG1_FIELD)
+    return reproduce.opd_error(seed=seed, field=common.FIG1_FIELD)
 
 
 def plot_fig4_left(data, path):
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import LogNorm
-
-    rings, arms = np.array(data["rings"]), np.array(data["arms"])
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.6), sharey=True)
-    panels = (("d_cubic", "piecewise-cubic interpolation (as the paper's bicubic)"),
-              ("d_zernike", "Zernike quadrature projection (ours)"))
-    norm = LogNorm(vmin=1e-16, vmax=10.0)
-    for ax, (key, title) in zip(axes, panels, strict=True):
-        d = np.clip(np.array(data[key]), 1e-16, None)
-        mesh = ax.pcolormesh(arms, rings, d, norm=norm, cmap="viridis", shading="nearest")
-        ax.contour(arms, rings, d, levels=[WAVE_TENTH], colors="r", linewidths=2)
-        ax.plot([40], [6], marker="*", color="w", markersize=12, markeredgecolor="k")
-        ax.set_title(title, fontsize=10)
-        ax.set_xlabel("K (arms)")
-        found = data["cubic" if key == "d_cubic" else "zernike"]["fewest_samples"]
-        if found:
-            ax.plot([found["arms"]], [found["rings"]], marker="o", color="r", markersize=8,
-                    markerfacecolor="none")
-    axes[0].set_ylabel("L (rings)")
-    fig.colorbar(mesh, ax=axes, label="d_Ω [waves RMS]  (red: λ/10; ★ paper's L=6, K=40; "
-                 "○ fewest samples)")
-    fig.suptitle("Berkner & Shroff Fig. 4 (left): OPD error over the aberration hypercube")
-    fig.savefig(path, dpi=130, bbox_inches="tight")
-    plt.close(fig)
+    reproduce.plot_fig4_left(data, path, dpi=130)
 
 
 # --------------------------------------------------------------------------------------

@@ -486,11 +486,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     rep = sub.add_parser(
         "reproduce", formatter_class=fmt,
-        help="reproduce the paper's Fig. 1 and Fig. 4 (right) into an output folder",
+        help="reproduce the paper's Fig. 1 and Fig. 4 into an output folder",
         description="Berkner & Shroff's Fig. 1 point (baseline B = 64 vs jmse), the Fig. 1 "
         "maps (OPD [waves] and log10 S_e over the band, frequencies in cutoff units "
         "1/(lambda N), u = 0.2 Nyquist/cutoff) and Fig. 4 right (JMSE versus p for the "
-        "quadrature rules at defocus -6 and -2.75 waves), as PNG + JSON + markdown. "
+        "quadrature rules at defocus -6 and -2.75 waves) and Fig. 4 left (RMS error [waves] "
+        "of the wavefront rebuilt from L rings x K arms of polar samples, needs scipy), as "
+        "PNG + JSON + markdown. "
         "A few minutes on a 2-core CPU.")
     rep.add_argument("--out", default="jmse_output", help="output folder")
     rep.add_argument("--quick", action="store_true", help="coarse grids, for testing")

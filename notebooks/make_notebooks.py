@@ -74,8 +74,9 @@ print(f"paper's FFT baseline B=64: {baseline:.6e} ({baseline / value - 1:+.1%})"
         ("md", """\
 # Berkner & Shroff reproduced (small)
 
-Fig. 1 (OPD and `log10 S_e` of the paper's operating point) and Fig. 4 right (JMSE versus the
-number of frequency nodes for the quadrature rules), at small sizes. `jmse-jax reproduce`
+Fig. 1 (OPD and `log10 S_e` of the paper's operating point), Fig. 4 right (JMSE versus the
+number of frequency nodes for the quadrature rules) and Fig. 4 left (error of the wavefront
+rebuilt from polar samples), at small sizes. `jmse-jax reproduce`
 writes the same at larger sizes; `benchmarks/paper_figures.py` the full experiments."""),
         ("code", SETUP + "\nfrom jmse_jax import _reproduce as rp"),
         ("md", "## Fig. 1 point: baseline vs the quadrature JMSE"),
@@ -104,6 +105,16 @@ rp.plot_fig4_right(data, os.path.join(out, "fig4_right.png"))
 for defocus, block in data["defocus"].items():
     print(defocus, {r: f"{block['rules'][r]['relative_error']['16']:.1e}" for r in data["rules"]})
 Image(os.path.join(out, "fig4_right.png"))"""),
+        ("md", """\
+## Fig. 4 left: the wavefront rebuilt from L rings x K arms
+
+RMS error (waves) over random Seidel designs. The paper interpolated the polar samples
+(cubic); projecting them onto Zernike polynomials by quadrature is exact from L = 3 rings."""),
+        ("code", """\
+left = rp.opd_error(6, (2, 3, 4, 6), (4, 6, 8, 16, 40))
+rp.plot_fig4_left(left, os.path.join(out, "fig4_left.png"))
+print("cubic:", left["cubic"]["fewest_samples"], " Zernike:", left["zernike"]["fewest_samples"])
+Image(os.path.join(out, "fig4_left.png"))"""),
     ],
     "lens_optimisation": [
         ("md", """\
