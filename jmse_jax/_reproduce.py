@@ -128,7 +128,7 @@ def fig1_maps(path, n_pupil: int = 128, n_freq: int = 121, wide: float = 0.6) ->
     im = axes[2].imshow(np.log10(s_e_wide), origin="lower", extent=(-wide, wide, -wide, wide),
                         cmap="gray")
     axes[2].add_patch(Rectangle((-u, -u), 2 * u, 2 * u, fill=False, edgecolor="r"))
-    axes[2].set_title("log10 S_e beyond the band (red: the band); ridges = OTF zeros",
+    axes[2].set_title("log10 S_e beyond the band (red: the band)\nridges = OTF zeros",
                       fontsize=9)
     axes[2].set_xlabel("ν_x [cutoff units 1/(λN)]")
     fig.colorbar(im, ax=axes[2])
