@@ -445,6 +445,11 @@ def sweep(
     bit for bit in the tests, gradients to a few ulp. Another ``batch_size`` or
     ``chunks_per_call`` may also change the last bits.
 
+    On a multi-core CPU, XLA spreads one device's work over the cores only partly; starting
+    Python with ``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>`` gives ``sweep``
+    one CPU device per core (on 2 cores: 20.2 s instead of 25.6 s for the 1875-design
+    singlet value-and-gradient sweep, ``benchmarks/results/sweep_bench.md``).
+
     Several hosts: start every process with ``jax.distributed.initialize(...)`` (on CPU also
     ``jax.config.update("jax_cpu_collectives_implementation", "gloo")``), then call ``sweep``
     with the same arguments everywhere; the mesh spans every process's devices. The tests
