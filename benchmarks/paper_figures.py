@@ -45,8 +45,6 @@ from jmse_jax import _reproduce as reproduce
 from jmse_jax._reproduce import (
     PAPER_RULES,
     RULE_LABELS,
-    THRESHOLDS,
-    first_stays_below,
     jmse_versus_nodes,
 )
 
@@ -114,15 +112,7 @@ def fig4_right(quick, cases_by_name):
             presets[preset] = dict(jmse=value, otf_nodes_per_quadrant=otf_nodes,
                                    relative_error=abs(value - reference) / abs(reference),
                                    options=options)
-        rows = {}
-        for rule in rules:
-            errors = {p: abs(values[rule][p] - reference) / abs(reference) for p in ps}
-            rows[rule] = dict(
-                jmse={str(p): values[rule][p] for p in ps},
-                relative_error={str(p): errors[p] for p in ps},
-                first_stays_below={f"{t:g}": first_stays_below(ps, errors, t)
-                                   for t in THRESHOLDS},
-            )
+        rows = reproduce.rule_rows(values, reference, ps)
         out["defocus"][str(defocus)] = dict(
             case=name, reference=reference, reference_convergence=convergence,
             reference_source=source,

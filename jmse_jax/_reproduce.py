@@ -201,6 +201,20 @@ def first_stays_below(ps, errors, threshold):
     return answer
 
 
+def rule_rows(values, reference, ps) -> dict:
+    """Per rule: the JMSE and relative error at each ``p`` (keys as strings, for JSON) and
+    the ``p`` from which the error stays below each of ``THRESHOLDS``."""
+    rows = {}
+    for rule, by_p in values.items():
+        errors = {p: abs(by_p[p] - reference) / abs(reference) for p in ps}
+        rows[rule] = dict(
+            jmse={str(p): by_p[p] for p in ps},
+            relative_error={str(p): errors[p] for p in ps},
+            first_stays_below={f"{t:g}": first_stays_below(ps, errors, t) for t in THRESHOLDS},
+        )
+    return rows
+
+
 def fig4_right(ps: Sequence[int], defocus_values=(-6.0, -2.75), reference_preset="high",
                log: Callable = print) -> dict:
     """JMSE versus ``p`` for the paper's four rules and ours, at each defocus [waves].
@@ -223,15 +237,7 @@ def fig4_right(ps: Sequence[int], defocus_values=(-6.0, -2.75), reference_preset
             source = f"jmse(preset={reference_preset!r})"
         values, n_nodes = jmse_versus_nodes(aberrations, FIG1_FIELD, FIG1_U, signal, noise,
                                             rules, ps, overlap)
-        rows = {}
-        for rule in rules:
-            errors = {p: abs(values[rule][p] - reference) / abs(reference) for p in ps}
-            rows[rule] = dict(
-                jmse={str(p): values[rule][p] for p in ps},
-                relative_error={str(p): errors[p] for p in ps},
-                first_stays_below={f"{t:g}": first_stays_below(ps, errors, t)
-                                   for t in THRESHOLDS},
-            )
+        rows = rule_rows(values, reference, ps)
         out["defocus"][str(defocus)] = dict(reference=reference, reference_source=source,
                                             otf_evaluations=n_nodes, rules=rows,
                                             seconds=time.perf_counter() - start)

@@ -226,6 +226,24 @@ def _otf_on_grid(aberrations, field, spacing, shape, otf_nodes, dtype):
     return jnp.where(flip, mirrored, direct)
 
 
+def _image_system(name, image, aberrations, field, u, signal, noise, otf_nodes):
+    """Checks, common dtype and the frequency-domain system of an image: returns ``image``
+    (cast), ``u``, the FFT frequency grid ``nu_x, nu_y``, the noise PSD on it and the OTF."""
+    _check_image(name, image)
+    _check_system(aberrations, field, u, signal, noise)
+    otf_nodes = _check_nodes(otf_nodes)
+    image = jnp.asarray(image)
+    dtype = common_dtype(image, aberrations, field, u, signal, noise)  # None has no leaves
+    image = image.astype(dtype)
+    u = jnp.asarray(u, dtype)
+    nu_x, nu_y, spacing = _grid(image.shape, u, dtype)
+    s_n = noise(nu_x, nu_y)
+    _check_positive_psd("noise PSD", s_n)
+    h = _otf_on_grid(aberrations, jnp.asarray(field, dtype), spacing, image.shape, otf_nodes,
+                     dtype)
+    return image, u, nu_x, nu_y, s_n, h
+
+
 def _grid(shape, u, dtype):
     """``(nu_x, nu_y)`` of the FFT grid and the spacings ``(d_y, d_x)`` [cutoff units]."""
     k_y, k_x = (jnp.asarray(_fft_indices(n), dtype) for n in shape)
@@ -335,20 +353,10 @@ def simulate_capture(
     >>> capture.shape
     (33, 33)
     """
-    _check_image("scene", scene)
-    _check_system(aberrations, field, u, noise=noise)
-    otf_nodes = _check_nodes(otf_nodes)
-    scene = jnp.asarray(scene)
-    dtype = common_dtype(scene, aberrations, field, u, noise)
-    scene = scene.astype(dtype)
-    u = jnp.asarray(u, dtype)
-    nu_x, nu_y, spacing = _grid(scene.shape, u, dtype)
-    s_n = noise(nu_x, nu_y)
-    _check_positive_psd("noise PSD", s_n)
-    h = _otf_on_grid(aberrations, jnp.asarray(field, dtype), spacing, scene.shape, otf_nodes,
-                     dtype)
+    scene, u, nu_x, nu_y, s_n, h = _image_system("scene", scene, aberrations, field, u, None,
+                                                 noise, otf_nodes)
     blurred = _apply_transfer(scene, h)
-    return blurred + _coloured_noise(key, scene.shape, 2.0 * u * jnp.sqrt(s_n), dtype)
+    return blurred + _coloured_noise(key, scene.shape, 2.0 * u * jnp.sqrt(s_n), scene.dtype)
 
 
 def restore(
@@ -406,18 +414,8 @@ def restore(
     >>> restored.shape
     (32, 32)
     """
-    _check_image("image", image)
-    _check_system(aberrations, field, u, signal, noise)
-    otf_nodes = _check_nodes(otf_nodes)
-    image = jnp.asarray(image)
-    dtype = common_dtype(image, aberrations, field, u, signal, noise)
-    image = image.astype(dtype)
-    u = jnp.asarray(u, dtype)
-    nu_x, nu_y, spacing = _grid(image.shape, u, dtype)
-    s_n = noise(nu_x, nu_y)
-    _check_positive_psd("noise PSD", s_n)
-    h = _otf_on_grid(aberrations, jnp.asarray(field, dtype), spacing, image.shape, otf_nodes,
-                     dtype)
+    image, _, nu_x, nu_y, s_n, h = _image_system("image", image, aberrations, field, u,
+                                                 signal, noise, otf_nodes)
     g = wiener_filter(h, signal(nu_x, nu_y), s_n)
     return _apply_transfer(image, g)
 

@@ -3,6 +3,7 @@ sharded == unsharded on 4 fake CPU devices (in a subprocess, see ``sweep_devices
 
 import json
 import os
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -240,8 +241,6 @@ def test_sharded_equals_unsharded_bit_for_bit(four_device_results):
 
 
 def _free_port() -> int:
-    import socket
-
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         return sock.getsockname()[1]
@@ -253,12 +252,10 @@ def two_host_results(tmp_path_factory):
     devices each): one sweep on a 4-device mesh spanning both "hosts"."""
     out_dir = tmp_path_factory.mktemp("two_hosts")
     port = _free_port()
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])]))
-    script = str(HERE / "sweep_hosts_worker.py")
+    script = str(HERE / "sweep_hosts_worker.py")  # its folder is on its sys.path
     workers = [subprocess.Popen([sys.executable, script, str(i), str(port), str(out_dir)],
-                                env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                text=True) for i in (0, 1)]
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+               for i in (0, 1)]
     logs = []
     try:
         for worker in workers:
