@@ -47,6 +47,14 @@ class AbstractAberrations(eqx.Module):
         """
         return None
 
+    @property
+    def perpendicular_chord_degree(self) -> int | None:
+        """Like ``chord_degree``, but along lines perpendicular to ``nu`` only (the chords of
+        the overlap OTF engine). ``<= 2`` lets the engine integrate each chord in closed form.
+        The default is ``chord_degree``.
+        """
+        return self.chord_degree
+
     def without_tilt(self) -> AbstractAberrations:
         """The same wavefront less its best-fit tilt (its projection on ``x`` and ``y``).
 
@@ -113,6 +121,12 @@ class Seidel(AbstractAberrations):
         # Degree 4 wavefront; its only quartic term (rho^4) leaves a difference that is
         # quadratic along lines perpendicular to nu, but cubic along general lines.
         return 3
+
+    @property
+    def perpendicular_chord_degree(self) -> int:
+        # Along xi = a e + t e_perp (e = nu / |nu|): nu . grad(rho^4) = 4 rho^2 (nu . xi) with
+        # nu . xi constant, so every term leaves at most t^2.
+        return 2
 
 
 def noll_to_nm(j: int) -> tuple[int, int]:
@@ -218,6 +232,15 @@ class Zernike(AbstractAberrations):
     @property
     def chord_degree(self) -> int:
         return max(0, max(noll_to_nm(j)[0] for j in self.noll) - 1)
+
+    @property
+    def perpendicular_chord_degree(self) -> int:
+        # A rotationally symmetric quartic part (only Z11, m = 0, at n = 4) leaves a quadratic
+        # along lines perpendicular to nu, as for Seidel's rho^4.
+        orders = [noll_to_nm(j) for j in self.noll]
+        if max(n for n, _ in orders) == 4 and all(m == 0 for n, m in orders if n == 4):
+            return 2
+        return self.chord_degree
 
     def without_tilt(self) -> Zernike:
         # Z2 and Z3 are exactly the tilt (the basis is orthogonal over the pupil).

@@ -15,6 +15,9 @@ Engines
     integrand is entire, so Gauss–Legendre converges spectrally for every ``s`` (no square
     root at the lens tips, no PSF window). The rule is rescaled to the exact lens area, so the
     aberration-free OTF is exact to rounding at any order.
+    (A closed form for each chord's ``t`` integral, exact when the phase is quadratic along
+    the chords as for Seidel wavefronts, is in ``_chords``; it is off, ``_EXACT_CHORDS``,
+    because on CPU it measured no faster.)
 ``"nudft"``
     Pupil on a ``B x B`` square grid, PSF by a ``2B``-padded FFT, then the OTF at each node by
     an explicit (non-uniform) DFT of the PSF. First order in ``1/B`` (staircase pupil edge).
@@ -33,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._aberrations import AbstractAberrations
+from ._chords import chord_integral
 from ._numerics import (
     barycentric_matrix,
     check_choice,
@@ -55,6 +59,9 @@ OTF_METHODS = ("overlap", "nudft", "fft")
 # Frequency nodes processed per block by the overlap engine (bounds the working memory to
 # about 8 * 2 * block * n_phi * n_t bytes per temporary).
 _OVERLAP_BLOCK = 128
+
+#: Integrate the chords of the overlap lens in closed form when the wavefront allows it.
+_EXACT_CHORDS = False
 
 
 def diffraction_limited_otf(r):
@@ -132,13 +139,32 @@ def _phase_integral_jvp(primals, tangents):
     return (re, im), (d_re, d_im)
 
 
+def _gauss_chords(phase, chord_w, n_phi, chord_points, interp, moment):
+    """Chord integrals by the Gauss rule in ``t`` (phase given at the collocation points)."""
+    weights = jnp.broadcast_to(chord_w[:, None, :], (chord_w.shape[0], 2, n_phi))
+    return _phase_integral(
+        phase.reshape(phase.shape[0], 2 * n_phi, chord_points),
+        weights.reshape(-1, 2 * n_phi),
+        interp,
+        moment,
+    )
+
+
+def _exact_chords(aberrations) -> bool:
+    degree = aberrations.perpendicular_chord_degree
+    return _EXACT_CHORDS and degree is not None and degree <= 2
+
+
 def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
     """Overlap-quadrature OTF at a flat vector of nodes; returns (real, imag)."""
+    exact = _exact_chords(aberrations)
     degree = aberrations.chord_degree
     chord_points = n_t if degree is None or degree + 1 >= n_t else degree + 1
     frac, w_frac, t_colloc, interp, moment = (
         jnp.asarray(a, dtype) for a in _overlap_rule(n_phi, n_t, chord_points)
     )
+    if exact:  # the phase at t = -1, 0, 1 fixes the quadratic; the t integral is exact
+        t_colloc = jnp.asarray([-1.0, 0.0, 1.0], dtype)
     s = safe_norm(nu_x, nu_y)
     interior = (s > 0) & (s < 1)
     # Double-where: the singular points s = 0 (direction undefined) and s >= 1 (empty
@@ -162,13 +188,12 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
     xi_y = along * ey4 + across * ex4
     dx, dy = nx[:, None, None, None], ny[:, None, None, None]
     phase = aberrations(xi_x + dx, xi_y + dy, field) - aberrations(xi_x - dx, xi_y - dy, field)
-    weights = jnp.broadcast_to(chord_w[:, None, :], (chord_w.shape[0], 2, n_phi))
-    re, im = _phase_integral(
-        phase.reshape(phase.shape[0], 2 * n_phi, chord_points),
-        weights.reshape(-1, 2 * n_phi),
-        interp,
-        moment,
-    )
+    if exact:
+        j_re, j_im = chord_integral(phase[..., 0], phase[..., 1], phase[..., 2])
+        w = chord_w[:, None, :]
+        re, im = jnp.sum(w * j_re, axis=(1, 2)), jnp.sum(w * j_im, axis=(1, 2))
+    else:
+        re, im = _gauss_chords(phase, chord_w, n_phi, chord_points, interp, moment)
     # Rescale by exact lens area / rule's lens area: exact for the unaberrated pupil.
     rule_area = 4.0 * jnp.sum(chord_w, axis=1)
     scale = diffraction_limited_otf(s_safe) / rule_area
