@@ -214,7 +214,10 @@ def _otf_overlap(aberrations, nu_x, nu_y, field, nodes):
     if n <= block:
         re, im = _otf_overlap_flat(aberrations, flat_x, flat_y, field, n_phi, n_t, dtype)
     else:
+        # Equal blocks no larger than the cap: the fewest blocks, padded by < n_blocks nodes
+        # (a fixed block size padded the last block by up to a whole block of dead work).
         n_blocks = -(-n // block)
+        block = -(-n // n_blocks)
         pad = n_blocks * block - n
         px = jnp.pad(flat_x, (0, pad)).reshape(n_blocks, block)
         py = jnp.pad(flat_y, (0, pad)).reshape(n_blocks, block)
