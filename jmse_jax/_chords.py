@@ -41,8 +41,8 @@ limit ``(e^{i phi(1)} - e^{i phi(-1)}) / (i b)``); ``K`` is a second Chebyshev s
 composite Gauss–Legendre in float64, accurate to about 1e-15.
 
 When the phase hardly varies along the chord (``g`` and one end point's slope both small),
-the two end-point terms are large and nearly cancel; there a 7-node Gauss rule with a
-Taylor exponential is exact to rounding instead.
+the two end-point terms are large and nearly cancel; there a 7-node Gauss rule is exact to
+rounding instead.
 
 The derivative rule is written by hand (``Ahat' = -(1 + i y Ahat) / 2`` and a series of
 ``K'`` tabulated the same way) and stays finite at every degenerate point (``g = 0``,
@@ -69,15 +69,14 @@ _Y = 6.0
 _A_DEGREE = 26
 _K_DEGREE = 20
 #: The small-phase branch (radians): ``g < _G_SMALL`` and an end-point slope ``< _B_SMALL``.
-#: There ``|phi(t) - phi(-1)| <= 0.32`` rad over the chord, and the 7-node Gauss rule with a
-#: degree-15 Taylor exponential is exact to rounding. Outside it the closed form's values are
+#: There ``|phi(t) - phi(-1)| <= 0.32`` rad over the chord, and the 7-node Gauss rule is exact
+#: to rounding. Outside it the closed form's values are
 #: exact to ~1e-13 absolute; its derivatives to ~1e-11, and to ~1e-9 for chords just outside
 #: the branch (``g ~ 1e-2``), where the end-point terms' cancellation amplifies the inputs'
 #: rounding (tests/test_chords.py measures both).
 _G_SMALL = 1e-2
 _B_SMALL = 0.1
 _SMALL_NODES = 7
-_TAYLOR_DEGREE = 15
 
 _SQRT_PI = math.sqrt(math.pi)
 _E_PI4 = complex(math.cos(math.pi / 4), math.sin(math.pi / 4))
@@ -164,19 +163,6 @@ def _small_rule():
     return tuple(float(v) for v in t), tuple(float(v) for v in w)
 
 
-def _expi_small(psi):
-    """``(cos psi, sin psi)`` by Taylor series for ``|psi| <= 0.35``."""
-    p2 = psi * psi
-    c = jnp.ones_like(psi)
-    s = jnp.ones_like(psi)
-    # cos: sum (-1)^k psi^2k / (2k)!, sin: psi sum (-1)^k psi^2k / (2k+1)!, Horner in psi^2.
-    n = _TAYLOR_DEGREE // 2
-    for k in range(n, 0, -1):
-        c = 1.0 - c * p2 / ((2 * k) * (2 * k - 1))
-        s = 1.0 - s * p2 / ((2 * k + 1) * (2 * k))
-    return c, s * psi
-
-
 class _C:
     """Minimal complex arithmetic on (real, imag) pairs of arrays (keeps the dtype real)."""
 
@@ -242,6 +228,11 @@ def _endpoint(beta, g, derivatives):
     return t, dt_db_a.where(use_a, dt_db_k), dt_dg_a.where(use_a, dt_dg_k)
 
 
+def _runtime_one(x):
+    """1, computed from ``x`` at run time so that XLA cannot prove it (see _materialise)."""
+    return (jnp.abs(x) + 1.0) / (jnp.abs(x) + 1.0)
+
+
 def _materialise(*arrays):
     """The arrays divided by a run-time 1 that XLA cannot prove to be 1.
 
@@ -250,7 +241,7 @@ def _materialise(*arrays):
     output of the wavefront polynomial), which would then be recomputed many times over; a
     division counts as expensive, so XLA computes its operand once and stores it.
     """
-    one = (jnp.abs(arrays[0]) + 1.0) / (jnp.abs(arrays[0]) + 1.0)
+    one = _runtime_one(arrays[0])
     return tuple(a / one for a in arrays)
 
 
@@ -266,8 +257,7 @@ def _chord(pm, p0, pp, derivatives):
     c2 = jnp.abs(c2_waves)
     b, g = two_pi * c1, two_pi * c2
     beta1, beta2 = b - 2.0 * g, b + 2.0 * g
-    # ``one`` is 1 at run time but not provably so (see _materialise).
-    one = (jnp.abs(g) + 1.0) / (jnp.abs(g) + 1.0)
+    one = _runtime_one(g)  # dividing by it makes XLA store a value once (see _materialise)
     e1 = _C(*(v / one for v in cos_sin_2pi(pm)))
     e2 = _C(*(v / one for v in cos_sin_2pi(pp)))
 
@@ -295,7 +285,7 @@ def _chord(pm, p0, pp, derivatives):
     sums = [_C(jnp.zeros_like(g), jnp.zeros_like(g)) for _ in range(3 if derivatives else 1)]
     for t_j, w_j in zip(nodes, weights, strict=True):
         s_j = t_j + 1.0
-        e_j = _C(*_expi_small(beta1_s * s_j + g_sm * (s_j * s_j)))
+        e_j = _C(*cos_sin_2pi((beta1_s * s_j + g_sm * (s_j * s_j)) / two_pi))
         sums[0] = sums[0] + e_j * w_j
         if derivatives:
             sums[1] = sums[1] + e_j * (w_j * t_j)
