@@ -191,6 +191,34 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
     return jnp.concatenate(parts, axis=-1)
 
 
+#: Fine S_e nodes per block of angular rows (see ``_fine_blocks``).
+_FINE_BLOCK_POINTS = 1 << 16
+
+
+def _fine_blocks(n_r, n_a):
+    """Equal blocks of angular rows of the fine S_e grid, each under ``_FINE_BLOCK_POINTS``.
+
+    XLA's CPU runtime allocates a call's scratch afresh; above about 32 MB the pages come
+    freshly mapped and every first touch faults (about 1 us per 4 kB page), which cost the
+    strongly aberrated tiers up to a third of their time. Blocks keep each temporary small.
+    They are unrolled: a ``lax.map`` loop measured much slower, and so did
+    ``jax.checkpoint`` around each block in reverse mode (benchmarks/README.md).
+    """
+    per_block = max(1, _FINE_BLOCK_POINTS // (2 * n_r))
+    n_blocks = -(-n_a // per_block)
+    size = -(-n_a // n_blocks)
+    return [(start, min(start + size, n_a)) for start in range(0, n_a, size)]
+
+
+def _fine_block(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype):
+    """``sum w S_e`` over the angular ``rows`` of the fine grid (and their outer nodes)."""
+    fine = polar_panels(u, n_r, n_a, dtype, rows=rows)
+    h = jnp.matmul(l_a, h_radial)
+    s_e = error_spectral_density(h, signal(fine.nu_x, fine.nu_y), noise(fine.nu_x, fine.nu_y))
+    s_x_out = signal(fine.outer_nu_x, fine.outer_nu_y)  # H = 0 beyond the cutoff
+    return jnp.sum(fine.weights * s_e) + jnp.sum(fine.outer_weights * s_x_out)
+
+
 def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror):
     """``\\iint_band S_e`` over the folded first quadrant (``mirror``: the x-mirrored one)."""
     sign = -1.0 if mirror else 1.0
@@ -202,17 +230,23 @@ def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror)
                                          noise(coarse.nu_x, coarse.nu_y))
             s_x_out = signal(coarse.outer_nu_x, coarse.outer_nu_y)  # H = 0 past the cutoff
             return jnp.sum(coarse.weights * s_e) + jnp.sum(coarse.outer_weights * s_x_out)
-        fine = polar_panels(u, *options["se_nodes"], dtype)
-        l_r, l_a = (jnp.asarray(m, dtype) for m in
-                    polar_interpolation_matrices(options["nodes"], options["se_nodes"]))
+        l_r, l_a = polar_interpolation_matrices(options["nodes"], options["se_nodes"])
         # Separable interpolation, radial axis first (the cheaper order). Complex products on
         # purpose: real ones (real and imaginary parts stacked) take half the flops, but
         # XLA's threaded real GEMM then sums in an order that depends on the program, which
         # broke the bit-for-bit equality of sweeps across device counts.
-        h = jnp.matmul(l_a, jnp.matmul(h, l_r.T))
-        s_e = error_spectral_density(h, signal(fine.nu_x, fine.nu_y), noise(fine.nu_x, fine.nu_y))
-        s_x_out = signal(fine.outer_nu_x, fine.outer_nu_y)  # H = 0 beyond the cutoff
-        return jnp.sum(fine.weights * s_e) + jnp.sum(fine.outer_weights * s_x_out)
+        h = jnp.matmul(h, jnp.asarray(l_r.T, dtype))
+        n_r, n_a = options["se_nodes"]
+        total = jnp.zeros((), dtype)
+        for start, stop in _fine_blocks(n_r, n_a):
+            # A zero computed from the running total orders the blocks: XLA would otherwise
+            # start every block's products and node arrays at once and keep them all alive
+            # (an optimization_barrier does not survive XLA's CPU pipeline).
+            zero = jax.lax.stop_gradient(jnp.minimum(jnp.abs(total), 0.0))
+            total = total + _fine_block(h, jnp.asarray(l_a[start:stop], dtype) + zero,
+                                        u + zero, signal, noise, n_r, n_a, (start, stop),
+                                        dtype)
+        return total
     nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
     h = _otf_at(aberrations, sign * nu_x, nu_y, field, options)
     s_e = error_spectral_density(h, signal(nu_x, nu_y), noise(nu_x, nu_y))

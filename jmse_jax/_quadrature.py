@@ -130,17 +130,21 @@ class PolarPanels(NamedTuple):
     outer_weights: jax.Array
 
 
-def polar_panels(u, n_radial: int, n_angular: int, dtype=None) -> PolarPanels:
+def polar_panels(u, n_radial: int, n_angular: int, dtype=None, rows=None) -> PolarPanels:
     """Polar Gauss panel rule over the folded band for Nyquist ratio ``u`` (traced).
 
     Triangle 1 holds angles ``alpha in [0, pi/4]`` from the ``nu_x`` axis, where a ray ends at
     ``r_max = u / cos(alpha)``; triangle 2 is its mirror image in the diagonal. Along each ray
     ``r = t R`` with ``R = min(r_max, 1)`` and ``t`` on a composite Gauss rule (panels
     ``_RADIAL_EDGES``), and the part beyond the cutoff ``[R, r_max]`` has its own nodes.
+    ``rows = (start, stop)`` keeps only those angular rows (static ints).
     """
     dtype = dtype or jnp.result_type(float)
     t, w_t = (jnp.asarray(a, dtype) for a in _radial_rule(n_radial))
-    frac, w_frac = (jnp.asarray(a, dtype) for a in gauss_legendre(n_angular, 0.0, 1.0))
+    frac, w_frac = gauss_legendre(n_angular, 0.0, 1.0)
+    if rows is not None:
+        frac, w_frac = frac[rows[0]:rows[1]], w_frac[rows[0]:rows[1]]
+    frac, w_frac = jnp.asarray(frac, dtype), jnp.asarray(w_frac, dtype)
     u = jnp.asarray(u, dtype)
     alpha = (math.pi / 4) * frac  # (n_a,)
     w_alpha = (math.pi / 4) * w_frac
