@@ -48,14 +48,16 @@ U_MAX = 1.5
 #: Grids of the ``"default"`` preset by difficulty: ``(largest aberration_strength, largest
 #: u, grid options)``; the first tier whose two bounds hold is used. The coarse first tier is
 #: kept away from bands that reach the cutoff, where ``H`` has its ``(1 - r)^{3/2}`` edge.
-#: Calibrated on 150 random Seidel designs (coefficients to +-8 waves, field 0-1, u 0.1-1,
-#: noise 1e-4 to 1e-2) against a converged reference (benchmarks/README.md, "Adaptive
-#: default"): each tier stays below about 1e-5 relative error over its range there (the
-#: top one up to a strength of about 25; beyond that use explicit, finer grids).
+#: Calibrated on 426 random Seidel designs (coefficients to +-8 waves, field 0-1, u 0.1-1,
+#: noise 1e-4 to 1e-2, strength up to 25) against a converged reference
+#: (benchmarks/README.md, "Adaptive default"): worst relative error 2e-6, 2e-5, 5e-5 and
+#: 1e-5 in the four tiers. At high SNR the S_e ridges along the OTF's zeros set the fine
+#: radial count (2400); the OTF grids are the smallest that hold the bound.
 DEFAULT_TIERS: tuple[tuple[float, float, dict], ...] = (
     (1.0, 0.5, dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20))),
-    (5.0, math.inf, dict(nodes=(48, 24), se_nodes=(1200, 192), overlap_nodes=(32, 32))),
-    (math.inf, math.inf, dict(nodes=(80, 32), se_nodes=(1600, 384), overlap_nodes=(56, 56))),
+    (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 28))),
+    (15.0, math.inf, dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40))),
+    (math.inf, math.inf, dict(nodes=(80, 32), se_nodes=(2400, 384), overlap_nodes=(56, 56))),
 )
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
@@ -65,15 +67,16 @@ _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes
 #: (radial, angular), ``se_nodes`` the finer nodes on which the OTF is interpolated and
 #: ``S_e`` integrated, ``overlap_nodes`` the per-frequency autocorrelation rule.
 #: ``tiers`` (``"default"`` only) adapts the grid to the aberration strength; the fixed grid
-#: listed with it is the middle tier's, used when a grid option is overridden.
+#: listed with it is the second tier's (that of the paper's Fig. 1 point), used when a grid
+#: option is overridden.
 PRESETS: dict[str, dict] = {
     "fast": dict(
         quadrature="polar", nodes=(24, 16), se_nodes=(400, 240), otf_method="overlap",
         overlap_nodes=(28, 28), tiers=None,
     ),
     "default": dict(
-        quadrature="polar", nodes=(48, 24), se_nodes=(1200, 192), otf_method="overlap",
-        overlap_nodes=(32, 32), tiers=DEFAULT_TIERS,
+        quadrature="polar", nodes=(40, 20), se_nodes=(2400, 160), otf_method="overlap",
+        overlap_nodes=(28, 28), tiers=DEFAULT_TIERS,
     ),
     "high": dict(
         quadrature="polar", nodes=(64, 40), se_nodes=(1600, 960), otf_method="overlap",
@@ -404,7 +407,7 @@ def jmse(
         that). The value can jump, within the tolerance, where a design crosses a tier
         bound; an optimiser wants a fixed grid (``"fast"``, ``optimise``'s default). Setting
         any grid option (``quadrature``, ``nodes``, ``se_nodes``, ``otf_method``,
-        ``overlap_nodes``) fixes the grid: the unset ones take the middle tier's values.
+        ``overlap_nodes``) fixes the grid: the unset ones take the second tier's values.
     quadrature : {"polar", "gauss", "gauss_polar", "trapezoid", "rectangle"}
         Frequency rule over the band (``jmse_jax._quadrature``).
     nodes : int or (int, int)

@@ -15,11 +15,13 @@ from jmse_jax._merit import _strength, _tier_index
 
 SIGNAL, NOISE = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
 
-# One design per tier: nearly diffraction limited, the paper's Fig. 1, every term at 5 waves.
+# One design per tier: nearly diffraction limited (strength 0.2), the paper's Fig. 1 (3.1),
+# every term at 5 waves at field 0.8 (14.7) and at full field (17.4).
 DESIGNS = [
     (jj.Seidel(w020=0.3, w222=0.2), 0.5, 0.2, 0),
     (jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198), 0.95, 0.2, 1),
     (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 0.8, 0.2, 2),
+    (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 1.0, 0.2, 3),
 ]
 
 
@@ -52,7 +54,8 @@ def test_tier_index_honours_both_bounds():
     assert int(_tier_index(0.5, 0.2, tiers)) == 0
     assert int(_tier_index(0.5, 0.8, tiers)) == 1  # a band reaching the cutoff skips tier 0
     assert int(_tier_index(3.0, 0.2, tiers)) == 1
-    assert int(_tier_index(50.0, 0.2, tiers)) == 2
+    assert int(_tier_index(10.0, 0.2, tiers)) == 2
+    assert int(_tier_index(50.0, 0.2, tiers)) == 3
     assert [t[0] for t in tiers] == sorted(t[0] for t in tiers) and tiers[-1][0] == math.inf
 
 
@@ -94,7 +97,7 @@ def _coefficients(ab):
 
 
 def test_default_gradient_matches_finite_differences_in_the_top_tier():
-    ab, field, u, _ = DESIGNS[2]
+    ab, field, u, _ = DESIGNS[3]
     grad = _default_value_and_grad(ab, field, u)[1].w040
     h = 1e-4
     f = [float(jmse_fn()(jj.Seidel(**{**_coefficients(ab), "w040": 5.0 + s * h}), field, u,
@@ -114,7 +117,7 @@ def test_vmap_over_designs_in_different_tiers():
 
 def test_grid_override_fixes_the_grid():
     options = jj.jmse_options("default", nodes=(16, 8))
-    assert options["tiers"] is None and options["se_nodes"] == (1200, 192)
+    assert options["tiers"] is None and options["se_nodes"] == jj.DEFAULT_TIERS[1][2]["se_nodes"]
     assert jj.jmse_options("default")["tiers"] is jj.DEFAULT_TIERS
     assert jj.jmse_options("fast")["tiers"] is None
     with pytest.raises(ValueError, match="unknown jmse option 'tiers'"):
@@ -122,11 +125,9 @@ def test_grid_override_fixes_the_grid():
 
 
 def test_sweep_runs_designs_one_by_one_on_cpu_and_equals_the_loop():
-    w020 = np.array([0.3, -2.75, 5.0])
-    ab = jj.Seidel(w020=w020, w040=np.array([0.0, 1.5578, 5.0]),
-                   w131=np.array([0.0, -1.2602, 5.0]), w222=np.array([0.2, 1.4089, 5.0]),
-                   w220=np.array([0.0, 2.7198, 5.0]))
-    field = np.array([0.5, 0.95, 0.8])
+    ab = jj.Seidel(**{name: np.array([float(getattr(d[0], name)) for d in DESIGNS])
+                      for name in ("w020", "w040", "w131", "w222", "w220")})
+    field = np.array([d[1] for d in DESIGNS])
     result = jj.sweep_jmse(ab, field, 0.2, SIGNAL, NOISE, progress=False)
     assert result.metadata["batch_size"] == 1
     loop = [float(jmse_fn()(a, f, 0.2, SIGNAL, NOISE)) for a, f, _, _ in DESIGNS]
