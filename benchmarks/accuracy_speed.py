@@ -211,7 +211,7 @@ def measure(method: Method, cases, timing_case, settings) -> dict:
 def default_by_tier(cases) -> dict:
     """Warm time of the adaptive default's value and value_and_grad on every bank case,
     grouped by the tier its ``aberration_strength`` selects (the headline times use Fig. 1
-    only, which lies in the middle tier)."""
+    only, which lies in tier 1)."""
     from jmse_jax._merit import _tier_index
 
     value_fn = _jmse()
@@ -358,7 +358,7 @@ def markdown(report) -> str:
     if tiered:
         lines += ["## The adaptive default by tier", "",
                   "The default picks its grid from `aberration_strength` (`DEFAULT_TIERS`); "
-                  "the headline times are those of Fig. 1 (middle tier). Every bank case:", "",
+                  "the headline times are those of Fig. 1 (tier 1). Every bank case:", "",
                   "| tier | grid | cases | value (median) | value_and_grad (median) |",
                   "|---|---|---|---|---|"]
         for tier, row in tiered["tiers"].items():

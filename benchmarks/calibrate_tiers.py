@@ -1,0 +1,151 @@
+"""Calibrate the grids of the adaptive default (``DEFAULT_TIERS``) on random Seidel designs.
+
+For each seed, ``--designs`` random designs are drawn: every coefficient of w020, w040,
+w131, w222, w220 uniform in ``[-a, a]`` with ``a`` one of 1, 2, 4, 8 waves, field uniform in
+[0, 1], ``u`` one of 0.1, 0.2, 0.3, 0.5, 0.7, 1.0, white noise log-uniform in [1e-4, 1e-2],
+``MarkovSignal(1, 5)``. Designs with ``aberration_strength`` above 25 are skipped (no
+tier is meant for them). Each design gets a reference on the grid ``REFERENCE`` and, where
+it is hard (strength above 5, ``u`` above 0.5 or noise below 3e-4), a check on the finer
+``CHECK`` grid; then the relative error of every candidate grid whose strength range covers
+it. The summary table gives the worst error per candidate by ranges of ``u`` and strength.
+
+    python benchmarks/calibrate_tiers.py                 # seeds 7, 11, 12 x 150 designs (~10 min)
+    python benchmarks/calibrate_tiers.py --seeds 1 --designs 20   # a quick look
+
+Writes ``results/calibrate_tiers.json`` (every design, reference and error) and
+``results/calibrate_tiers.md`` (the summary).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import _common as common
+import jax
+import numpy as np
+
+import jmse_jax as jj
+
+REFERENCE = dict(nodes=(96, 48), se_nodes=(4800, 960), overlap_nodes=(64, 64))
+CHECK = dict(nodes=(112, 56), se_nodes=(6400, 1280), overlap_nodes=(96, 96))
+
+#: Candidate grids: the tiers before (``old_*``) and after this calibration, and others tried.
+CANDIDATES = {
+    "old_t0 = tier 0": dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20)),
+    "old_t1": dict(nodes=(48, 24), se_nodes=(1200, 192), overlap_nodes=(32, 32)),
+    "old_t1, se 2400": dict(nodes=(48, 24), se_nodes=(2400, 192), overlap_nodes=(32, 32)),
+    "f2": dict(nodes=(48, 24), se_nodes=(2400, 192), overlap_nodes=(28, 28)),
+    "j": dict(nodes=(48, 24), se_nodes=(1800, 192), overlap_nodes=(28, 28)),
+    "a2 = tier 1": dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 28)),
+    "c2": dict(nodes=(36, 18), se_nodes=(2400, 160), overlap_nodes=(26, 26)),
+    "k": dict(nodes=(32, 16), se_nodes=(2400, 128), overlap_nodes=(26, 26)),
+    "l": dict(nodes=(36, 18), se_nodes=(1800, 128), overlap_nodes=(24, 24)),
+    "old_t2": dict(nodes=(80, 32), se_nodes=(1600, 384), overlap_nodes=(56, 56)),
+    "t2se = tier 3": dict(nodes=(80, 32), se_nodes=(2400, 384), overlap_nodes=(56, 56)),
+    "h2": dict(nodes=(64, 28), se_nodes=(2400, 256), overlap_nodes=(48, 48)),
+    "m = tier 2": dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40)),
+}
+_STRONG = ("old_t2", "t2se = tier 3", "h2", "m = tier 2")
+
+STRENGTH_BINS = ((0, 1), (1, 3), (3, 5), (5, 7), (7, 10), (10, 15), (15, 25))
+U_BINS = ((0.0, 0.5), (0.5, 1.0))
+
+
+def _applies(name: str, strength: float, u: float) -> bool:
+    """Which candidates are evaluated on a design (the tier ranges they could serve)."""
+    if name.startswith("old_t0"):
+        return strength <= 1.5 and u <= 0.5
+    if name in _STRONG:
+        return strength > 4
+    return strength <= 8
+
+
+def calibrate(seed: int, designs: int, jitted: dict) -> list[dict]:
+    rng = np.random.default_rng(seed)
+
+    def merit(options):
+        key = repr(options)
+        if key not in jitted:
+            jitted[key] = jax.jit(lambda ab, f, u, s, n, o=options: jj.jmse(ab, f, u, s, n, **o))
+        return jitted[key]
+
+    rows, start = [], time.perf_counter()
+    for i in range(designs):
+        scale = rng.choice([1.0, 2.0, 4.0, 8.0])
+        coefficients = {k: float(rng.uniform(-scale, scale))
+                        for k in ("w020", "w040", "w131", "w222", "w220")}
+        field = float(rng.uniform(0, 1))
+        u = float(rng.choice([0.1, 0.2, 0.3, 0.5, 0.7, 1.0]))
+        noise_variance = float(10 ** rng.uniform(-4, -2))
+        ab = jj.Seidel(**coefficients)
+        strength = float(jj.aberration_strength(ab, field, u))
+        if strength > 25:
+            continue
+        args = (ab, field, u, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(noise_variance))
+        reference = float(merit(REFERENCE)(*args))
+        row = dict(seed=seed, coefficients=coefficients, field=field, u=u,
+                   noise=noise_variance, strength=strength, reference=reference, errors={})
+        if strength > 5 or u > 0.5 or noise_variance < 3e-4:
+            check = float(merit(CHECK)(*args))
+            row["check_error"] = abs(check - reference) / reference
+        for name, options in CANDIDATES.items():
+            if _applies(name, strength, u):
+                value = float(merit(options)(*args))
+                row["errors"][name] = abs(value - reference) / reference
+        rows.append(row)
+        print(f"seed {seed} design {i:3d} strength {strength:5.2f} u {u} "
+              f"[{time.perf_counter() - start:.0f} s]", flush=True)
+    return rows
+
+
+def summary(rows: list[dict]) -> str:
+    checks = [r["check_error"] for r in rows if "check_error" in r]
+    lines = [
+        "# Calibration of the adaptive default's tiers",
+        "",
+        f"{len(rows)} random Seidel designs (`benchmarks/calibrate_tiers.py`; seeds "
+        f"{sorted({r['seed'] for r in rows})}). Reference grid {REFERENCE}; on the "
+        f"{len(checks)} hard designs it agrees with {CHECK} to "
+        f"{max(checks):.1e} at worst (median {np.median(checks):.1e}).",
+        "",
+        "Worst relative error of each candidate grid (nodes, se_nodes, overlap_nodes) by "
+        "range of `u` and of `aberration_strength` K (n = designs in the range; a blank cell: "
+        "the candidate was not evaluated there):",
+        "",
+    ]
+    names = list(CANDIDATES)
+    lines.append("| u | K | n | " + " | ".join(names) + " |")
+    lines.append("|---" * (len(names) + 3) + "|")
+    for u_lo, u_hi in U_BINS:
+        for k_lo, k_hi in STRENGTH_BINS:
+            chosen = [r for r in rows if u_lo < r["u"] <= u_hi and k_lo < r["strength"] <= k_hi]
+            cells = []
+            for name in names:
+                errors = [r["errors"][name] for r in chosen if name in r["errors"]]
+                cells.append(f"{max(errors):.0e}" if errors else "")
+            lines.append(f"| ({u_lo}, {u_hi}] | ({k_lo}, {k_hi}] | {len(chosen)} | "
+                         + " | ".join(cells) + " |")
+    lines += ["", "Grids:", ""]
+    lines += [f"- `{name}`: {options}" for name, options in CANDIDATES.items()]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[7, 11, 12])
+    parser.add_argument("--designs", type=int, default=150, help="designs drawn per seed")
+    args = parser.parse_args(argv)
+    jitted: dict = {}
+    rows = [row for seed in args.seeds for row in calibrate(seed, args.designs, jitted)]
+    report = dict(description=__doc__.splitlines()[0], machine=common.machine_info(),
+                  reference=REFERENCE, check=CHECK, candidates=CANDIDATES, designs=rows)
+    common.write_json(common.RESULTS / "calibrate_tiers.json", report)
+    text = summary(rows)
+    (common.RESULTS / "calibrate_tiers.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
