@@ -12,9 +12,11 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from ._aberrations import AbstractAberrations
 from ._numerics import (
+    abs2,
     check_choice,
     check_count,
     check_finite_tree,
@@ -213,13 +215,67 @@ def _fine_blocks(n_r, n_a):
     return [(start, min(start + size, n_a)) for start in range(0, n_a, size)]
 
 
-def _fine_block(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype):
-    """``sum w S_e`` over the angular ``rows`` of the fine grid (and their outer nodes)."""
+def _fine_parts(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype, adjoint):
+    """``sum w S_e`` over the angular ``rows`` of the fine grid (and their outer nodes); with
+    ``adjoint``, also ``G = L_a^T g`` where ``g = w dS_e/dRe(H) + i w dS_e/dIm(H)``."""
     fine = polar_panels(u, n_r, n_a, dtype, rows=rows)
     h = jnp.matmul(l_a, h_radial)
-    s_e = error_spectral_density(h, signal(fine.nu_x, fine.nu_y), noise(fine.nu_x, fine.nu_y))
+    s_x = signal(fine.nu_x, fine.nu_y)
+    s_n = noise(fine.nu_x, fine.nu_y)
+    denominator = abs2(h) * s_x + s_n
+    s_e = s_x * s_n / denominator  # error_spectral_density, with its denominator kept
     s_x_out = signal(fine.outer_nu_x, fine.outer_nu_y)  # H = 0 beyond the cutoff
-    return jnp.sum(fine.weights * s_e) + jnp.sum(fine.outer_weights * s_x_out)
+    value = jnp.sum(fine.weights * s_e) + jnp.sum(fine.outer_weights * s_x_out)
+    if not adjoint:
+        return value
+    # dS_e/dRe(H) + i dS_e/dIm(H) = -2 S_x^2 S_n H / D^2 = -2 (S_e S_x / D) H.
+    g = (-2.0 * fine.weights * s_e * s_x / denominator) * h
+    return value, jnp.matmul(l_a.T.astype(g.dtype), g)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(5, 6, 7, 8))
+def _fine_block(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype):
+    """``_fine_parts``'s value, with a derivative rule that needs no fine-grid residuals.
+
+    The total depends on the coarse ``h_radial`` through a linear map and an element-wise
+    ``S_e``, so its derivative is ``Re <G, dh_radial>`` with ``G`` (coarse-sized) computed in
+    the forward pass by one extra product. Reverse mode then stores ``G`` only, instead of
+    every fine-grid intermediate (tens of MB, which XLA's CPU runtime maps afresh on every
+    call above about 32 MB), and its backward pass is a product with ``G``. Tangents of ``u``,
+    the spectra (and ``l_a``, normally a symbolic zero) go through an ordinary forward-mode
+    derivative of the block, only when they are not symbolic zeros.
+    """
+    return _fine_parts(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype, False)
+
+
+def _is_zero(tangent) -> bool:
+    return all(isinstance(leaf, SymbolicZero) for leaf in jax.tree_util.tree_leaves(
+        tangent, is_leaf=lambda x: isinstance(x, SymbolicZero)))
+
+
+def _instantiate(tangent):
+    return jax.tree_util.tree_map(
+        lambda t: jnp.zeros(t.shape, t.dtype) if isinstance(t, SymbolicZero) else t,
+        tangent, is_leaf=lambda x: isinstance(x, SymbolicZero))
+
+
+def _fine_block_jvp(n_r, n_a, rows, dtype, primals, tangents):
+    h_radial, l_a, u, signal, noise = primals
+    d_h, d_l, d_u, d_signal, d_noise = tangents
+    value, adjoint = _fine_parts(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype, True)
+    tangent = jnp.zeros_like(value)
+    if not _is_zero(d_h):
+        tangent = tangent + jnp.sum(jnp.real(jnp.conj(adjoint) * d_h))
+    others = (l_a, u, signal, noise)
+    d_others = (d_l, d_u, d_signal, d_noise)
+    if not _is_zero(d_others):
+        def block(l_a, u, signal, noise):
+            return _fine_parts(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype, False)
+        tangent = tangent + jax.jvp(block, others, _instantiate(d_others))[1]
+    return value, tangent
+
+
+_fine_block.defjvp(_fine_block_jvp, symbolic_zeros=True)
 
 
 def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror):
@@ -246,9 +302,9 @@ def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror)
             # start every block's products and node arrays at once and keep them all alive
             # (an optimization_barrier does not survive XLA's CPU pipeline).
             zero = jax.lax.stop_gradient(jnp.minimum(jnp.abs(total), 0.0))
-            total = total + _fine_block(h, jnp.asarray(l_a[start:stop], dtype) + zero,
-                                        u + zero, signal, noise, n_r, n_a, (start, stop),
-                                        dtype)
+            rows_l = jax.lax.stop_gradient(jnp.asarray(l_a[start:stop], dtype) + zero)
+            total = total + _fine_block(h, rows_l, u + zero, signal, noise, n_r, n_a,
+                                        (start, stop), dtype)
         return total
     nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
     h = _otf_at(aberrations, sign * nu_x, nu_y, field, options)
