@@ -230,7 +230,7 @@ def _fine_parts(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype, adjoint)
         return value
     # dS_e/dRe(H) + i dS_e/dIm(H) = -2 S_x^2 S_n H / D^2 = -2 (S_e S_x / D) H.
     g = (-2.0 * fine.weights * s_e * s_x / denominator) * h
-    return value, jnp.matmul(l_a.T.astype(g.dtype), g)
+    return value, jnp.matmul(l_a.T, g)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(5, 6, 7, 8))
