@@ -199,6 +199,11 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
 #: Fine S_e nodes per block of angular rows (see ``_fine_blocks``).
 _FINE_BLOCK_POINTS = 1 << 16
 
+#: Radial nodes per fine angular row on the part of the ray beyond the cutoff. There
+#: ``S_e = S_x``, smooth and free of the OTF's ridges, so a short Gauss rule is exact to
+#: rounding (the inner rule's thousands of nodes would only cost time).
+_OUTER_NODES = 48
+
 
 def _fine_blocks(n_r, n_a):
     """Equal blocks of angular rows of the fine S_e grid, each under ``_FINE_BLOCK_POINTS``.
@@ -215,16 +220,25 @@ def _fine_blocks(n_r, n_a):
     return [(start, min(start + size, n_a)) for start in range(0, n_a, size)]
 
 
-def _fine_parts(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype, adjoint):
+def _signal_at(signal, panels, outer):
+    """``S_x`` at the inner (or ``outer``) nodes; isotropic signals from the stored radii."""
+    if type(signal).__call__ is AbstractSignal.__call__:  # S_x(nu) = radial(|nu|)
+        return signal.radial(panels.outer_radius if outer else panels.radius)
+    if outer:
+        return signal(panels.outer_nu_x, panels.outer_nu_y)
+    return signal(panels.nu_x, panels.nu_y)
+
+
+def _fine_parts(h, l_a, u, signal, noise, n_r, n_a, rows, dtype, adjoint):
     """``sum w S_e`` over the angular ``rows`` of the fine grid (and their outer nodes); with
-    ``adjoint``, also ``G = L_a^T g`` where ``g = w dS_e/dRe(H) + i w dS_e/dIm(H)``."""
-    fine = polar_panels(u, n_r, n_a, dtype, rows=rows)
-    h = jnp.matmul(l_a, h_radial)
-    s_x = signal(fine.nu_x, fine.nu_y)
+    ``adjoint``, also ``L_a^T g`` where ``g = w dS_e/dRe(H) + i w dS_e/dIm(H)``."""
+    fine = polar_panels(u, n_r, n_a, dtype, rows=rows, n_outer=_OUTER_NODES)
+    h = jnp.matmul(l_a, h)
+    s_x = _signal_at(signal, fine, outer=False)
     s_n = noise(fine.nu_x, fine.nu_y)
     denominator = abs2(h) * s_x + s_n
     s_e = s_x * s_n / denominator  # error_spectral_density, with its denominator kept
-    s_x_out = signal(fine.outer_nu_x, fine.outer_nu_y)  # H = 0 beyond the cutoff
+    s_x_out = _signal_at(signal, fine, outer=True)  # H = 0 beyond the cutoff
     value = jnp.sum(fine.weights * s_e) + jnp.sum(fine.outer_weights * s_x_out)
     if not adjoint:
         return value
@@ -233,19 +247,55 @@ def _fine_parts(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype, adjoint)
     return value, jnp.matmul(l_a.T, g)
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(5, 6, 7, 8))
-def _fine_block(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype):
-    """``_fine_parts``'s value, with a derivative rule that needs no fine-grid residuals.
+def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
+    """``\\iint S_e`` on the ``fine`` polar grid, ``H`` interpolated from the ``coarse`` one.
 
-    The total depends on the coarse ``h_radial`` through a linear map and an element-wise
-    ``S_e``, so its derivative is ``Re <G, dh_radial>`` with ``G`` (coarse-sized) computed in
-    the forward pass by one extra product. Reverse mode then stores ``G`` only, instead of
-    every fine-grid intermediate (tens of MB, which XLA's CPU runtime maps afresh on every
-    call above about 32 MB), and its backward pass is a product with ``G``. Tangents of ``u``,
-    the spectra (and ``l_a``, normally a symbolic zero) go through an ordinary forward-mode
-    derivative of the block, only when they are not symbolic zeros.
+    Blocks of angular rows (``_fine_blocks``) run one after another. With ``adjoint``, also
+    returns ``G = L_r^T (sum_blocks L_a^T g)``: the coarse-sized gradient of the total with
+    respect to ``Re(H_coarse)`` + i ``Im(H_coarse)``.
     """
-    return _fine_parts(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype, False)
+    l_r, l_a = polar_interpolation_matrices(coarse, fine)
+    n_r, n_a = fine
+    # Separable interpolation, radial axis first (the cheaper order). Complex products on
+    # purpose: real ones (real and imaginary parts stacked) take half the flops, but
+    # XLA's threaded real GEMM then sums in an order that depends on the program, which
+    # broke the bit-for-bit equality of sweeps across device counts.
+    h = jnp.matmul(h_coarse, jnp.asarray(l_r.T, dtype))
+    total = jnp.zeros((), dtype)
+    back = jnp.zeros(h.shape, h.dtype) if adjoint else None
+    for start, stop in _fine_blocks(n_r, n_a):
+        # A zero computed from the running total orders the blocks: XLA would otherwise
+        # start every block's products and node arrays at once and keep them all alive
+        # (an optimization_barrier does not survive XLA's CPU pipeline).
+        zero = jax.lax.stop_gradient(jnp.minimum(jnp.abs(total), 0.0))
+        rows_l = jax.lax.stop_gradient(jnp.asarray(l_a[start:stop], dtype) + zero)
+        part = _fine_parts(h, rows_l, u + zero, signal, noise, n_r, n_a, (start, stop), dtype,
+                           adjoint)
+        if adjoint:
+            part, block_back = part
+            back = back + block_back
+            # The adjoint products join the chain too, or XLA defers them to the end and
+            # keeps every block's g alive (tens of MB on the finest grids).
+            part = part + jax.lax.stop_gradient(jnp.minimum(jnp.abs(back[..., 0, 0]), 0.0))[0]
+        total = total + part
+    if not adjoint:
+        return total
+    return total, jnp.matmul(back, jnp.asarray(l_r, dtype))
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5, 6))
+def _fine_stage(h_coarse, u, signal, noise, coarse, fine, dtype):
+    """``_fine_total``'s value, with a derivative rule that needs no fine-grid residuals.
+
+    The total depends on ``h_coarse`` through linear interpolation and an element-wise
+    ``S_e``, so its derivative is ``Re <G, dh_coarse>`` with the coarse-sized ``G`` formed
+    in the forward pass (one extra product per block). Reverse mode then stores ``G`` only,
+    a few kB, instead of every fine-grid intermediate (tens of MB; XLA's CPU runtime maps
+    scratch above about 32 MB afresh on every call and pays a page fault per 4 kB), and
+    its backward pass is a product with ``G``. Tangents of ``u`` and the spectra go
+    through an ordinary forward-mode derivative, only when they are not symbolic zeros.
+    """
+    return _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, False)
 
 
 def _is_zero(tangent) -> bool:
@@ -259,23 +309,23 @@ def _instantiate(tangent):
         tangent, is_leaf=lambda x: isinstance(x, SymbolicZero))
 
 
-def _fine_block_jvp(n_r, n_a, rows, dtype, primals, tangents):
-    h_radial, l_a, u, signal, noise = primals
-    d_h, d_l, d_u, d_signal, d_noise = tangents
-    value, adjoint = _fine_parts(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype, True)
+def _fine_stage_jvp(coarse, fine, dtype, primals, tangents):
+    h_coarse, u, signal, noise = primals
+    d_h, d_u, d_signal, d_noise = tangents
+    value, adjoint = _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, True)
     tangent = jnp.zeros_like(value)
     if not _is_zero(d_h):
         tangent = tangent + jnp.sum(jnp.real(jnp.conj(adjoint) * d_h))
-    others = (l_a, u, signal, noise)
-    d_others = (d_l, d_u, d_signal, d_noise)
+    others = (u, signal, noise)
+    d_others = (d_u, d_signal, d_noise)
     if not _is_zero(d_others):
-        def block(l_a, u, signal, noise):
-            return _fine_parts(h_radial, l_a, u, signal, noise, n_r, n_a, rows, dtype, False)
-        tangent = tangent + jax.jvp(block, others, _instantiate(d_others))[1]
+        def total(u, signal, noise):
+            return _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, False)
+        tangent = tangent + jax.jvp(total, others, _instantiate(d_others))[1]
     return value, tangent
 
 
-_fine_block.defjvp(_fine_block_jvp, symbolic_zeros=True)
+_fine_stage.defjvp(_fine_stage_jvp, symbolic_zeros=True)
 
 
 def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror):
@@ -289,23 +339,7 @@ def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror)
                                          noise(coarse.nu_x, coarse.nu_y))
             s_x_out = signal(coarse.outer_nu_x, coarse.outer_nu_y)  # H = 0 past the cutoff
             return jnp.sum(coarse.weights * s_e) + jnp.sum(coarse.outer_weights * s_x_out)
-        l_r, l_a = polar_interpolation_matrices(options["nodes"], options["se_nodes"])
-        # Separable interpolation, radial axis first (the cheaper order). Complex products on
-        # purpose: real ones (real and imaginary parts stacked) take half the flops, but
-        # XLA's threaded real GEMM then sums in an order that depends on the program, which
-        # broke the bit-for-bit equality of sweeps across device counts.
-        h = jnp.matmul(h, jnp.asarray(l_r.T, dtype))
-        n_r, n_a = options["se_nodes"]
-        total = jnp.zeros((), dtype)
-        for start, stop in _fine_blocks(n_r, n_a):
-            # A zero computed from the running total orders the blocks: XLA would otherwise
-            # start every block's products and node arrays at once and keep them all alive
-            # (an optimization_barrier does not survive XLA's CPU pipeline).
-            zero = jax.lax.stop_gradient(jnp.minimum(jnp.abs(total), 0.0))
-            rows_l = jax.lax.stop_gradient(jnp.asarray(l_a[start:stop], dtype) + zero)
-            total = total + _fine_block(h, rows_l, u + zero, signal, noise, n_r, n_a,
-                                        (start, stop), dtype)
-        return total
+        return _fine_stage(h, u, signal, noise, options["nodes"], options["se_nodes"], dtype)
     nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
     h = _otf_at(aberrations, sign * nu_x, nu_y, field, options)
     s_e = error_spectral_density(h, signal(nu_x, nu_y), noise(nu_x, nu_y))

@@ -155,6 +155,29 @@ def _exact_chords(aberrations) -> bool:
     return _EXACT_CHORDS and degree is not None and degree <= 2
 
 
+@jax.checkpoint
+def _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc):
+    """Phase difference ``W(xi + nu) - W(xi - nu)`` [waves] at the collocation points of
+    every chord, ``(N, 2 halves, n_phi, Q)`` (``nu`` in cutoff units shifts each copy of the
+    unit-radius pupil by ``nu``).
+
+    Under ``jax.checkpoint``: reverse mode recomputes these few polynomial evaluations
+    instead of storing the wavefront's terms at every collocation point (one array of the
+    phase's size per term, tens of MB per call in all, which XLA's CPU runtime maps afresh
+    and page-faults on every call). ``(nx, ny)`` is ``nu``, ``(ex, ey)`` its direction,
+    ``a`` each chord's distance from the lens's mid-line and ``sin_phi`` its half-length.
+    """
+    # Chord points xi = side * a * e + t sin(phi) * e_perp, e_perp = (-ey, ex), on both halves.
+    side = jnp.asarray([1.0, -1.0], a.dtype)
+    along = side[None, :, None, None] * a[:, None, :, None]  # (N, 2, n_phi, 1)
+    across = (sin_phi[:, :, None] * t_colloc[None, None, :])[:, None, :, :]  # (N, 1, n_phi, Q)
+    ex4, ey4 = ex[:, None, None, None], ey[:, None, None, None]
+    xi_x = along * ex4 - across * ey4
+    xi_y = along * ey4 + across * ex4
+    dx, dy = nx[:, None, None, None], ny[:, None, None, None]
+    return aberrations(xi_x + dx, xi_y + dy, field) - aberrations(xi_x - dx, xi_y - dy, field)
+
+
 def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
     """Overlap-quadrature OTF at a flat vector of nodes; returns (real, imag)."""
     exact = _exact_chords(aberrations)
@@ -178,16 +201,7 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
     sin_phi = jnp.sin(phi)
     a = jnp.cos(phi) - s_safe[:, None]  # distance of the chord from the lens's mid-line
     chord_w = phi_max[:, None] * w_frac[None, :] * sin_phi**2  # (N, n_phi)
-
-    # Chord points xi = side * a * e + t sin(phi) * e_perp, e_perp = (-ey, ex), on both halves.
-    side = jnp.asarray([1.0, -1.0], dtype)
-    along = side[None, :, None, None] * a[:, None, :, None]  # (N, 2, n_phi, 1)
-    across = (sin_phi[:, :, None] * t_colloc[None, None, :])[:, None, :, :]  # (N, 1, n_phi, Q)
-    ex4, ey4 = ex[:, None, None, None], ey[:, None, None, None]
-    xi_x = along * ex4 - across * ey4
-    xi_y = along * ey4 + across * ex4
-    dx, dy = nx[:, None, None, None], ny[:, None, None, None]
-    phase = aberrations(xi_x + dx, xi_y + dy, field) - aberrations(xi_x - dx, xi_y - dy, field)
+    phase = _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc)
     if exact:
         j_re, j_im = chord_integral(phase[..., 0], phase[..., 1], phase[..., 2])
         w = chord_w[:, None, :]

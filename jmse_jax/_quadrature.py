@@ -120,6 +120,8 @@ class PolarPanels(NamedTuple):
     ``inner`` nodes cover ``|nu| <= min(r_max, 1)`` (where the OTF is needed); ``outer``
     nodes cover the part of each ray beyond the cutoff (``H = 0``, so ``S_e = S_x``).
     Weights include the polar Jacobian ``r`` and the factor 4 of the folded quadrants.
+    ``radius`` and ``outer_radius`` are ``|nu|`` at the nodes (shaped ``(n_angles, n)``, the
+    same for both triangles).
     """
 
     nu_x: jax.Array
@@ -128,19 +130,28 @@ class PolarPanels(NamedTuple):
     outer_nu_x: jax.Array
     outer_nu_y: jax.Array
     outer_weights: jax.Array
+    radius: jax.Array
+    outer_radius: jax.Array
 
 
-def polar_panels(u, n_radial: int, n_angular: int, dtype=None, rows=None) -> PolarPanels:
+def polar_panels(u, n_radial: int, n_angular: int, dtype=None, rows=None,
+                 n_outer: int | None = None) -> PolarPanels:
     """Polar Gauss panel rule over the folded band for Nyquist ratio ``u`` (traced).
 
     Triangle 1 holds angles ``alpha in [0, pi/4]`` from the ``nu_x`` axis, where a ray ends at
     ``r_max = u / cos(alpha)``; triangle 2 is its mirror image in the diagonal. Along each ray
     ``r = t R`` with ``R = min(r_max, 1)`` and ``t`` on a composite Gauss rule (panels
     ``_RADIAL_EDGES``), and the part beyond the cutoff ``[R, r_max]`` has its own nodes.
-    ``rows = (start, stop)`` keeps only those angular rows (static ints).
+    ``rows = (start, stop)`` keeps only those angular rows (static ints). ``n_outer`` sets a
+    separate Gauss rule of that many nodes for the part beyond the cutoff (default: the
+    inner rule), where the integrand is the smooth ``S_x`` alone.
     """
     dtype = dtype or jnp.result_type(float)
     t, w_t = (jnp.asarray(a, dtype) for a in _radial_rule(n_radial))
+    if n_outer is None:
+        t_out, w_t_out = t, w_t
+    else:
+        t_out, w_t_out = (jnp.asarray(a, dtype) for a in gauss_legendre(n_outer, 0.0, 1.0))
     frac, w_frac = gauss_legendre(n_angular, 0.0, 1.0)
     if rows is not None:
         frac, w_frac = frac[rows[0]:rows[1]], w_frac[rows[0]:rows[1]]
@@ -152,15 +163,16 @@ def polar_panels(u, n_radial: int, n_angular: int, dtype=None, rows=None) -> Pol
     inner = jnp.minimum(r_max, 1.0)
     r = inner[:, None] * t[None, :]  # (n_a, n_r)
     w = 4.0 * w_alpha[:, None] * inner[:, None] * w_t[None, :] * r
-    r_out = inner[:, None] + (r_max - inner)[:, None] * t[None, :]
-    w_out = 4.0 * w_alpha[:, None] * (r_max - inner)[:, None] * w_t[None, :] * r_out
+    r_out = inner[:, None] + (r_max - inner)[:, None] * t_out[None, :]
+    w_out = 4.0 * w_alpha[:, None] * (r_max - inner)[:, None] * w_t_out[None, :] * r_out
     cos_a, sin_a = jnp.cos(alpha)[:, None], jnp.sin(alpha)[:, None]
     # Triangle 2 (alpha in [pi/4, pi/2]) is triangle 1 with nu_x and nu_y swapped.
     nu_x = jnp.stack([r * cos_a, r * sin_a])
     nu_y = jnp.stack([r * sin_a, r * cos_a])
     out_x = jnp.stack([r_out * cos_a, r_out * sin_a])
     out_y = jnp.stack([r_out * sin_a, r_out * cos_a])
-    return PolarPanels(nu_x, nu_y, jnp.stack([w, w]), out_x, out_y, jnp.stack([w_out, w_out]))
+    return PolarPanels(nu_x, nu_y, jnp.stack([w, w]), out_x, out_y, jnp.stack([w_out, w_out]),
+                       r, r_out)
 
 
 def polar_interpolation_matrices(coarse: tuple[int, int], fine: tuple[int, int]):
