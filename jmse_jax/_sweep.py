@@ -414,8 +414,8 @@ def sweep(
         about ``batch_size`` times the memory of one design in flight, which
         ``result.metadata["memory"]["temp_bytes"] / batch_size`` reports (XLA's temporary
         buffers of the compiled sweep). For the singlet lens + ``jmse`` in float64 on CPU
-        (``benchmarks/sweep_bench.py``) it is about 30 MB (value) and 40 MB (value and
-        gradient) with ``preset="fast"``, and 110 MB and 140 MB with ``"default"``.
+        (``benchmarks/sweep_bench.py``) it is about 7 MB (value) and 10 MB (value and
+        gradient) with ``preset="fast"``, and 11 MB and 45 MB with ``"default"``.
     chunks_per_call : int >= 1
         Chunks of ``batch_size`` designs each device works through (``lax.map``) per call
         from the host. The host loops over calls, updating the progress bar after each; more
