@@ -289,11 +289,12 @@ def _fine_stage(h_coarse, u, signal, noise, coarse, fine, dtype):
 
     The total depends on ``h_coarse`` through linear interpolation and an element-wise
     ``S_e``, so its derivative is ``Re <G, dh_coarse>`` with the coarse-sized ``G`` formed
-    in the forward pass (one extra product per block). Reverse mode then stores ``G`` only,
-    a few kB, instead of every fine-grid intermediate (tens of MB; XLA's CPU runtime maps
-    scratch above about 32 MB afresh on every call and pays a page fault per 4 kB), and
-    its backward pass is a product with ``G``. Tangents of ``u`` and the spectra go
-    through an ordinary forward-mode derivative, only when they are not symbolic zeros.
+    in the forward pass (one extra product per block). Reverse mode then stores ``G`` only
+    (the coarse grid's size, under 100 kB), instead of every fine-grid intermediate (tens
+    of MB; XLA's CPU runtime maps scratch above about 32 MB afresh on every call and pays a
+    page fault per 4 kB), and its backward pass is a product with ``G``. Tangents of ``u``
+    and the spectra go through an ordinary forward-mode derivative, only when they are not
+    symbolic zeros.
     """
     return _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, False)
 
