@@ -16,7 +16,6 @@ from jax.custom_derivatives import SymbolicZero
 
 from ._aberrations import AbstractAberrations
 from ._numerics import (
-    abs2,
     check_choice,
     check_count,
     check_finite_tree,
@@ -231,19 +230,27 @@ def _signal_at(signal, panels, outer):
 
 def _fine_parts(h, l_a, u, signal, noise, n_r, n_a, rows, dtype, adjoint):
     """``sum w S_e`` over the angular ``rows`` of the fine grid (and their outer nodes); with
-    ``adjoint``, also ``L_a^T g`` where ``g = w dS_e/dRe(H) + i w dS_e/dIm(H)``."""
+    ``adjoint``, also ``L_a^T g`` where ``g = w dS_e/dRe(H) + i w dS_e/dIm(H)``.
+
+    ``h`` holds the radially interpolated OTF as real numbers, ``(2, n_coarse, 2 n_r)`` with
+    the real parts first: the real matrix ``l_a`` then takes real products (half the flops
+    of complex ones), and the adjoint comes back in the same layout. These products contract
+    over at most a few dozen rows, so their summation order is fixed.
+    """
     fine = polar_panels(u, n_r, n_a, dtype, rows=rows, n_outer=_OUTER_NODES)
     h = jnp.matmul(l_a, h)
+    h_re, h_im = h[..., :n_r], h[..., n_r:]
     s_x = _signal_at(signal, fine, outer=False)
     s_n = noise(fine.nu_x, fine.nu_y)
-    denominator = abs2(h) * s_x + s_n
+    denominator = (h_re * h_re + h_im * h_im) * s_x + s_n
     s_e = s_x * s_n / denominator  # error_spectral_density, with its denominator kept
     s_x_out = _signal_at(signal, fine, outer=True)  # H = 0 beyond the cutoff
     value = jnp.sum(fine.weights * s_e) + jnp.sum(fine.outer_weights * s_x_out)
     if not adjoint:
         return value
     # dS_e/dRe(H) + i dS_e/dIm(H) = -2 S_x^2 S_n H / D^2 = -2 (S_e S_x / D) H.
-    g = (-2.0 * fine.weights * s_e * s_x / denominator) * h
+    coefficient = -2.0 * fine.weights * s_e * s_x / denominator
+    g = jnp.concatenate([coefficient * h_re, coefficient * h_im], axis=-1)
     return value, jnp.matmul(l_a.T, g)
 
 
@@ -256,11 +263,13 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
     """
     l_r, l_a = polar_interpolation_matrices(coarse, fine)
     n_r, n_a = fine
-    # Separable interpolation, radial axis first (the cheaper order). Complex products on
-    # purpose: real ones (real and imaginary parts stacked) take half the flops, but
-    # XLA's threaded real GEMM then sums in an order that depends on the program, which
-    # broke the bit-for-bit equality of sweeps across device counts.
+    # Separable interpolation, radial axis first (the cheaper order). The radial products
+    # (which contract over up to n_r fine nodes in the adjoint) stay complex: as real
+    # products XLA's threaded GEMM summed in an order that depended on the program and
+    # broke the bit-for-bit equality of sweeps across device counts. The angular products,
+    # inside the blocks, contract over a few dozen rows and are real (``_fine_parts``).
     h = jnp.matmul(h_coarse, jnp.asarray(l_r.T, dtype))
+    h = jnp.concatenate([jnp.real(h), jnp.imag(h)], axis=-1)
     total = jnp.zeros((), dtype)
     back = jnp.zeros(h.shape, h.dtype) if adjoint else None
     for start, stop in _fine_blocks(n_r, n_a):
@@ -280,6 +289,7 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
         total = total + part
     if not adjoint:
         return total
+    back = jax.lax.complex(back[..., :n_r], back[..., n_r:])
     return total, jnp.matmul(back, jnp.asarray(l_r, dtype))
 
 
