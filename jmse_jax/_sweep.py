@@ -414,7 +414,7 @@ def sweep(
         about ``batch_size`` times the memory of one design in flight, which
         ``result.metadata["memory"]["temp_bytes"] / batch_size`` reports (XLA's temporary
         buffers of the compiled sweep). For the singlet lens + ``jmse`` in float64 on CPU
-        (``benchmarks/sweep_bench.py``) it is about 7 MB (value) and 10 MB (value and
+        (``benchmarks/sweep_bench.py``) it is about 9 MB (value) and 10 MB (value and
         gradient) with ``preset="fast"``, and 11 MB and 45 MB with ``"default"``.
     chunks_per_call : int >= 1
         Chunks of ``batch_size`` designs each device works through (``lax.map``) per call
