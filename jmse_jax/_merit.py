@@ -285,7 +285,7 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
             back = back + block_back
             # The adjoint products join the chain too, or XLA defers them to the end and
             # keeps every block's g alive (tens of MB on the finest grids).
-            part = part + jax.lax.stop_gradient(jnp.minimum(jnp.abs(back[..., 0, 0]), 0.0))[0]
+            part = part + jax.lax.stop_gradient(jnp.minimum(jnp.abs(back[0, 0, 0]), 0.0))
         total = total + part
     if not adjoint:
         return total
