@@ -7,7 +7,10 @@ w131, w222, w220 uniform in ``[-a, a]`` with ``a`` one of 1, 2, 4, 8 waves, fiel
 tier is meant for them). Each design gets a reference on the grid ``REFERENCE`` and, where
 it is hard (strength above 5, ``u`` above 0.5 or noise below 3e-4), a check on the finer
 ``CHECK`` grid; then the relative error of every candidate grid whose strength range covers
-it. The summary table gives the worst error per candidate by ranges of ``u`` and strength.
+it. The summary table gives the worst error per candidate by ranges of ``u`` and strength,
+and a second section checks the middle tier's shortcut (``TierShortcut``): on every design the
+default sends to that tier, how often the trial grid is kept, and the error of what is
+returned.
 
     python benchmarks/calibrate_tiers.py                 # seeds 7, 11, 12 x 150 designs (~10 min)
     python benchmarks/calibrate_tiers.py --seeds 1 --designs 20   # a quick look
@@ -45,6 +48,7 @@ CANDIDATES = {
     "t2se = tier 3": dict(nodes=(80, 32), se_nodes=(2400, 384), overlap_nodes=(56, 56)),
     "h2": dict(nodes=(64, 28), se_nodes=(2400, 256), overlap_nodes=(48, 48)),
     "m = tier 2": dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40)),
+    "shortcut check": dict(jj.DEFAULT_TIERS[1][3].check),
 }
 _STRONG = ("old_t2", "t2se = tier 3", "h2", "m = tier 2")
 
@@ -54,8 +58,10 @@ U_BINS = ((0.0, 0.5), (0.5, 1.0))
 
 def _applies(name: str, strength: float, u: float) -> bool:
     """Which candidates are evaluated on a design (the tier ranges they could serve)."""
-    if name.startswith("old_t0"):
-        return strength <= 1.5 and u <= 0.5
+    if name.startswith("old_t0"):  # also the middle tier's shortcut trial
+        return strength <= 5
+    if name == "shortcut check":
+        return strength <= 5
     if name in _STRONG:
         return strength > 4
     return strength <= 8
@@ -85,13 +91,15 @@ def calibrate(seed: int, designs: int, jitted: dict) -> list[dict]:
         args = (ab, field, u, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(noise_variance))
         reference = float(merit(REFERENCE)(*args))
         row = dict(seed=seed, coefficients=coefficients, field=field, u=u,
-                   noise=noise_variance, strength=strength, reference=reference, errors={})
+                   noise=noise_variance, strength=strength, reference=reference, errors={},
+                   values={})
         if strength > 5 or u > 0.5 or noise_variance < 3e-4:
             check = float(merit(CHECK)(*args))
             row["check_error"] = abs(check - reference) / reference
         for name, options in CANDIDATES.items():
             if _applies(name, strength, u):
                 value = float(merit(options)(*args))
+                row["values"][name] = value
                 row["errors"][name] = abs(value - reference) / reference
         rows.append(row)
         print(f"seed {seed} design {i:3d} strength {strength:5.2f} u {u} "
@@ -128,7 +136,43 @@ def summary(rows: list[dict]) -> str:
                          + " | ".join(cells) + " |")
     lines += ["", "Grids:", ""]
     lines += [f"- `{name}`: {options}" for name, options in CANDIDATES.items()]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + shortcut_summary(rows)) + "\n"
+
+
+def shortcut_summary(rows: list[dict]) -> list[str]:
+    """How the middle tier's shortcut fares on the designs the default sends to that tier."""
+    from jmse_jax._merit import _tier_index
+
+    shortcut = jj.DEFAULT_TIERS[1][3]
+    trial_name = next(k for k in CANDIDATES if CANDIDATES[k] == shortcut.trial)
+    grid_name = next(k for k in CANDIDATES if CANDIDATES[k] == jj.DEFAULT_TIERS[1][2])
+    middle = [r for r in rows if int(_tier_index(r["strength"], r["u"], jj.DEFAULT_TIERS)) == 1]
+    kept, returned, ratios = [], [], []
+    for r in middle:
+        trial, check = r["values"][trial_name], r["values"]["shortcut check"]
+        difference = abs(trial - check) / abs(trial)
+        accepted = difference <= shortcut.rtol
+        if shortcut.rtol / 10 < difference:  # near the threshold, where the bound matters
+            ratios.append(r["errors"][trial_name] / difference)
+        if accepted:
+            kept.append(r["errors"][trial_name])
+        returned.append(r["errors"][trial_name] if accepted else r["errors"][grid_name])
+    return [
+        "",
+        "## The middle tier's shortcut",
+        "",
+        f"Rule: keep the trial grid `{trial_name}` ({shortcut.trial}) when it agrees with the "
+        f"check grid ({shortcut.check}) to rtol {shortcut.rtol:g}; otherwise use the tier's own "
+        f"grid `{grid_name}`. On the {len(middle)} designs the default sends to the middle tier:",
+        "",
+        f"- trial kept on {len(kept)} ({100 * len(kept) / len(middle):.0f} %), worst error of "
+        f"a kept trial {max(kept):.1e};",
+        f"- worst error of the value returned {max(returned):.1e} (median "
+        f"{np.median(returned):.1e});",
+        f"- largest ratio of the trial's error to its difference from the check, over the "
+        f"{len(ratios)} designs whose difference exceeds rtol / 10: {max(ratios):.2f} (below "
+        f"1, the difference bounds the error).",
+    ]
 
 
 def main(argv=None) -> int:

@@ -16,6 +16,7 @@ from ._aberrations import (
 from ._merit import (
     DEFAULT_TIERS as DEFAULT_TIERS,
     PRESETS as PRESETS,
+    TierShortcut as TierShortcut,
     aberration_strength as aberration_strength,
     baseline_jmse as baseline_jmse,
     jmse as jmse,

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -36,6 +37,7 @@ from ._spectra import AbstractNoise, AbstractSignal, error_spectral_density
 __all__ = [
     "DEFAULT_TIERS",
     "PRESETS",
+    "TierShortcut",
     "U_MAX",
     "aberration_strength",
     "baseline_jmse",
@@ -46,19 +48,42 @@ __all__ = [
 #: Largest Nyquist ratio accepted: at u = 1.5 the band's corners lie past the cutoff.
 U_MAX = 1.5
 
+class TierShortcut(NamedTuple):
+    """A cheaper grid a tier tries first: its value is kept when a coarse ``check`` agrees.
+
+    The tier computes the merit on ``trial`` and on ``check`` (both cheaper than the tier's
+    own grid); when ``|trial - check| <= rtol |trial|`` it returns the ``trial`` value,
+    otherwise it computes its own grid. The two grids differ in every node count, so their
+    errors are unrelated and their difference bounds the ``trial`` grid's error
+    (benchmarks/README.md, "Adaptive default").
+    """
+
+    trial: dict
+    check: dict
+    rtol: float
+
+
+_TIER0_GRID = dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20))
+
 #: Grids of the ``"default"`` preset by difficulty: ``(largest aberration_strength, largest
-#: u, grid options)``; the first tier whose two bounds hold is used. The coarse first tier is
-#: kept away from bands that reach the cutoff, where ``H`` has its ``(1 - r)^{3/2}`` edge.
-#: Calibrated on 426 random Seidel designs (coefficients to +-8 waves, field 0-1, u 0.1-1,
-#: noise 1e-4 to 1e-2, strength up to 25) against a converged reference
-#: (benchmarks/README.md, "Adaptive default"): worst relative error 2e-6, 2e-5, 5e-5 and
-#: 1e-5 in the four tiers. At high SNR the S_e ridges along the OTF's zeros set the fine
-#: radial count (2400); the OTF grids are the smallest that hold the bound.
-DEFAULT_TIERS: tuple[tuple[float, float, dict], ...] = (
-    (1.0, 0.5, dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20))),
-    (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 28))),
-    (15.0, math.inf, dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40))),
-    (math.inf, math.inf, dict(nodes=(80, 32), se_nodes=(2400, 384), overlap_nodes=(56, 56))),
+#: u, grid options, shortcut)``; the first tier whose two bounds hold is used. The coarse
+#: first tier is kept away from bands that reach the cutoff, where ``H`` has its
+#: ``(1 - r)^{3/2}`` edge. Calibrated on 426 random Seidel designs (coefficients to +-8
+#: waves, field 0-1, u 0.1-1, noise 1e-4 to 1e-2, strength up to 25) against a converged
+#: reference (benchmarks/README.md, "Adaptive default"): worst relative error 2e-6, 2e-5,
+#: 5e-5 and 1e-5 in the four tiers. At high SNR the S_e ridges along the OTF's zeros set the
+#: fine radial count (2400); the OTF grids are the smallest that hold the bound. The second
+#: tier first tries the first tier's grid (``TierShortcut``): on the calibration designs of that
+#: tier it was accepted for 54 % of them, with a worst accepted error of 4.3e-6.
+DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
+    (1.0, 0.5, _TIER0_GRID, None),
+    (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 28)),
+     TierShortcut(trial=_TIER0_GRID,
+              check=dict(nodes=(20, 8), se_nodes=(200, 32), overlap_nodes=(16, 16)),
+              rtol=1e-5)),
+    (15.0, math.inf, dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40)), None),
+    (math.inf, math.inf, dict(nodes=(80, 32), se_nodes=(2400, 384), overlap_nodes=(56, 56)),
+     None),
 )
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
@@ -408,7 +433,7 @@ def _tier_index(strength, u, tiers):
     """Index of the first tier whose bounds hold (traceable; the last tier has none)."""
     index = jnp.zeros((), jnp.int32)
     past = jnp.asarray(True)
-    for bound, u_bound, _ in tiers[:-1]:
+    for bound, u_bound, *_ in tiers[:-1]:
         past = past & ((strength > bound) | (u > u_bound))
         index = index + past.astype(jnp.int32)
     return index
@@ -423,8 +448,8 @@ def _merit_value(options, dtype, aberrations, field, u, signal, noise):
 
 
 class _Static:
-    """Static arguments (the tiers' option dicts and the dtype) of ``_switched_merit``,
-    hashable by value."""
+    """Static arguments (the tiers' plans and the dtype) of ``_switched_merit``, hashable by
+    value."""
 
     def __init__(self, value):
         self.value = value
@@ -437,31 +462,89 @@ class _Static:
         return isinstance(other, _Static) and self._key == other._key
 
 
+def _tier_plans(options, tiers):
+    """Each tier's full option set and its shortcut's ``(trial, check, rtol)`` (or None)."""
+    plans = []
+    for _, _, grid, shortcut in tiers:
+        short = None
+        if shortcut is not None:
+            short = ({**options, **shortcut.trial}, {**options, **shortcut.check},
+                     float(shortcut.rtol))
+        plans.append(({**options, **grid}, short))
+    return tuple(plans)
+
+
+def _accepts(trial, check, rtol):
+    """Whether a shortcut's ``trial`` value stands (False for non-finite values)."""
+    return jnp.abs(trial - check) <= rtol * jnp.abs(trial)
+
+
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
 def _switched_merit(static, index, operands):
-    """The merit on the grid ``static.value[0][index]``: one tier runs (``lax.switch``).
+    """The merit of tier ``index`` of ``static.value[0]``: one tier runs (``lax.switch``).
+
+    A tier with a shortcut computes its trial and check values and keeps the trial's when
+    they agree, else computes its own grid (``lax.cond``: only one of the two runs under
+    ``jit``).
 
     The derivative rule is written by hand: differentiating through ``lax.switch`` makes JAX
     carry the residuals of every branch (many times the cost of the selected one). Here the
     selected branch computes its value and gradient together, and the tangent is their
     inner product with the input tangents, outside the switch (forward and reverse mode).
+    The gradient is that of the grid whose value is returned.
     """
-    grids, dtype = static.value
-    branches = [functools.partial(_apply_merit, grid, dtype) for grid in grids]
-    return jax.lax.switch(index, branches, operands)
+    plans, dtype = static.value
+    return jax.lax.switch(index, [functools.partial(_tier_value, plan, dtype)
+                                  for plan in plans], operands)
 
 
 def _apply_merit(grid, dtype, operands):
     return _merit_value(grid, dtype, *operands)
 
 
+def _tier_value(plan, dtype, operands):
+    grid, shortcut = plan
+    if shortcut is None:
+        return _apply_merit(grid, dtype, operands)
+    trial_grid, check_grid, rtol = shortcut
+    trial = _apply_merit(trial_grid, dtype, operands)
+    check = _apply_merit(check_grid, dtype, operands)
+    return jax.lax.cond(_accepts(trial, check, rtol), lambda ops: trial,
+                        functools.partial(_apply_merit, grid, dtype), operands)
+
+
+def _tier_value_and_grad(plan, dtype, operands):
+    grid, shortcut = plan
+    full = jax.value_and_grad(functools.partial(_apply_merit, grid, dtype))
+    if shortcut is None:
+        return full(operands)
+    trial_grid, check_grid, rtol = shortcut
+    # The trial's gradient is formed with its value: it is the answer more often than not,
+    # and its value alone would cost a second pass when it is.
+    trial, gradient = jax.value_and_grad(
+        functools.partial(_apply_merit, trial_grid, dtype))(operands)
+    check = _apply_merit(check_grid, dtype, operands)
+    return jax.lax.cond(_accepts(trial, check, rtol), lambda ops: (trial, gradient), full,
+                        operands)
+
+
+def _eager_tier_value(plan, dtype, operands):
+    """``_tier_value`` for concrete inputs: only the grids needed are compiled and run."""
+    grid, shortcut = plan
+    if shortcut is not None:
+        trial_grid, check_grid, rtol = shortcut
+        trial = _apply_merit(trial_grid, dtype, operands)
+        if bool(_accepts(trial, _apply_merit(check_grid, dtype, operands), rtol)):
+            return trial
+    return _apply_merit(grid, dtype, operands)
+
+
 @_switched_merit.defjvp
 def _switched_merit_jvp(static, primals, tangents):
-    grids, dtype = static.value
+    plans, dtype = static.value
     index, operands = primals
     _, d_operands = tangents
-    branches = [jax.value_and_grad(functools.partial(_apply_merit, grid, dtype))
-                for grid in grids]
+    branches = [functools.partial(_tier_value_and_grad, plan, dtype) for plan in plans]
     value, gradient = jax.lax.switch(index, branches, operands)
     terms = [jnp.sum(g * t) for g, t in zip(jax.tree_util.tree_leaves(gradient),
                                              jax.tree_util.tree_leaves(d_operands),
@@ -565,12 +648,12 @@ def jmse(
     if tiers is None:
         value = _merit_value(options, dtype, *operands)
     else:
-        grids = tuple({**options, **grid} for _, _, grid in tiers)
+        plans = _tier_plans(options, tiers)
         index = _tier_index(_strength(aberrations, field, u), jax.lax.stop_gradient(u), tiers)
         if finite is None:  # concrete: run (and compile) the selected tier only
-            value = _merit_value(grids[int(index)], dtype, *operands)
+            value = _eager_tier_value(plans[int(index)], dtype, operands)
         else:
-            value = _switched_merit(_Static((grids, dtype)), index, operands)
+            value = _switched_merit(_Static((plans, dtype)), index, operands)
     if finite is not None:
         value = jnp.where(finite, value, jnp.inf)
     return value

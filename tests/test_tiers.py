@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from compiled import jmse_fn
+from problems import REFERENCES
 
 import jmse_jax as jj
 from jmse_jax._merit import _strength, _tier_index
@@ -23,6 +24,9 @@ DESIGNS = [
     (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 0.8, 0.2, 2),
     (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 1.0, 0.2, 3),
 ]
+# A second middle-tier design (strength 3.4) whose shortcut is refused: 6 waves of defocus
+# has S_e ridges along its OTF's zero rings that the first tier's grid misses by 4e-4.
+DEFOCUS_M6 = (jj.Seidel(w020=-6.0), 0.0, 0.2, 1)
 
 
 @pytest.mark.parametrize("a, u", [(1.0, 0.5), (-3.0, 0.2), (2.0, 1.2)])
@@ -59,12 +63,29 @@ def test_tier_index_honours_both_bounds():
     assert [t[0] for t in tiers] == sorted(t[0] for t in tiers) and tiers[-1][0] == math.inf
 
 
-@pytest.mark.parametrize("ab, field, u, tier", DESIGNS)
-def test_default_equals_its_tier_grid(ab, field, u, tier):
-    """Eager, jit, value_and_grad and forward mode all run the tier the strength selects."""
+def _fixed(ab, field, u, grid):
+    return float(jax.jit(lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **grid))(ab))
+
+
+@pytest.mark.parametrize("ab, field, u, tier, path", [
+    (*DESIGNS[0], "grid"), (*DESIGNS[1], "trial"), (*DEFOCUS_M6, "grid"), (*DESIGNS[2], "grid"),
+    (*DESIGNS[3], "grid"),
+])
+def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
+    """Eager, jit, value_and_grad and forward mode all run the tier the strength selects,
+    and within a tier with a shortcut the grid that the shortcut's rule picks."""
     strength = float(jj.aberration_strength(ab, field, u))
     assert int(_tier_index(strength, u, jj.DEFAULT_TIERS)) == tier
-    grid = jj.DEFAULT_TIERS[tier][2]
+    _, _, grid, shortcut = jj.DEFAULT_TIERS[tier]
+    if shortcut is not None:  # the rule, restated: keep the trial when the check agrees
+        trial = _fixed(ab, field, u, shortcut.trial)
+        check = _fixed(ab, field, u, shortcut.check)
+        accepted = abs(trial - check) <= shortcut.rtol * abs(trial)
+        assert path == ("trial" if accepted else "grid")
+        if accepted:
+            grid = shortcut.trial
+    else:
+        assert path == "grid"
     expected, expected_grad = jax.jit(jax.value_and_grad(
         lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **grid)))(ab)
     eager = jj.jmse(ab, field, u, SIGNAL, NOISE)
@@ -77,6 +98,17 @@ def test_default_equals_its_tier_grid(ab, field, u, tier):
     # Forward mode: d/dt jmse(w020 + t) equals the reverse-mode gradient.
     _, tangent = _default_jvp_w020(ab, field, u)
     np.testing.assert_allclose(tangent, gradient.w020, rtol=1e-10)
+
+
+@pytest.mark.parametrize("ab, field, u, name", [
+    (*DESIGNS[1][:3], "fig1"), (*DEFOCUS_M6[:3], "defocus_m6"),
+])
+def test_shortcut_keeps_the_middle_tier_accurate(ab, field, u, name):
+    """Whichever grid the middle tier returns (the trial for Fig. 1, its own for defocus -6),
+    it is within 1e-6 of the bank's converged reference."""
+    value = float(jmse_fn()(ab, field, u, SIGNAL, NOISE))
+    reference = REFERENCES[name][1]
+    assert abs(value - reference) <= 1e-6 * reference
 
 
 @jax.jit
