@@ -203,6 +203,8 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
     The phase difference across the overlap lens grows with ``|nu|``, so the overlap rule's
     order is reduced on the inner radial panels in proportion to their outer radius
     ``t_max``: ``n = n_min + (n_full - n_min) t_max`` (the full order on the outer panel).
+    With the private option ``_remat_otf`` (see ``_tier_plans``) reverse mode recomputes the
+    inner panels' blocks instead of storing their chord moments.
     """
     if options["otf_method"] != "overlap":
         return _otf_at(aberrations, nu_x, nu_y, field, options)
@@ -215,7 +217,8 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
         )
         stop = start + count
         parts.append(_otf_overlap(aberrations, nu_x[..., start:stop], nu_y[..., start:stop],
-                                  field, order))
+                                  field, order,
+                                  remat=options.get("_remat_otf", False) and t_max < 1))
         start = stop
     return jnp.concatenate(parts, axis=-1)
 
@@ -463,14 +466,27 @@ class _Static:
 
 
 def _tier_plans(options, tiers):
-    """Each tier's full option set and its shortcut's ``(trial, check, rtol)`` (or None)."""
+    """Each tier's full option set and its shortcut's ``(trial, check, rtol)`` (or None).
+
+    The last (finest) tier's reverse pass recomputes the overlap blocks of its inner radial
+    panels (``_remat_otf``) instead of storing their chord moments. All tiers share one
+    executable whose scratch is sized for the largest branch; with all of the last tier's
+    moments stored it was 41 MB, above the ~32 MB at which XLA's CPU runtime maps scratch
+    afresh on every call and pays a page fault per 4 kB, and every design paid it. The inner
+    panels hold about half the moments and a third of the OTF work, so the scratch falls to
+    27 MB for about 13 % more CPU time on the last tier's value_and_grad
+    (benchmarks/README.md, optimisation log).
+    """
     plans = []
-    for _, _, grid, shortcut in tiers:
+    for i, (_, _, grid, shortcut) in enumerate(tiers):
         short = None
         if shortcut is not None:
             short = ({**options, **shortcut.trial}, {**options, **shortcut.check},
                      float(shortcut.rtol))
-        plans.append(({**options, **grid}, short))
+        full = {**options, **grid}
+        if i == len(tiers) - 1:
+            full["_remat_otf"] = True
+        plans.append((full, short))
     return tuple(plans)
 
 

@@ -216,7 +216,9 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
     return re, im
 
 
-def _otf_overlap(aberrations, nu_x, nu_y, field, nodes):
+def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False):
+    """Overlap-engine OTF at ``(nu_x, nu_y)``; ``remat``: reverse mode recomputes each block
+    of nodes instead of storing its chord moments (less memory, more time)."""
     n_phi, n_t = nodes
     dtype = common_dtype(aberrations, nu_x, nu_y, field)
     nu_x, nu_y = jnp.broadcast_arrays(jnp.asarray(nu_x, dtype), jnp.asarray(nu_y, dtype))
@@ -238,6 +240,9 @@ def _otf_overlap(aberrations, nu_x, nu_y, field, nodes):
 
         def one_block(xy):
             return _otf_overlap_flat(aberrations, xy[0], xy[1], field, n_phi, n_t, dtype)
+
+        if remat:
+            one_block = jax.checkpoint(one_block)
 
         re, im = jax.lax.map(one_block, (px, py))
         re, im = re.reshape(-1)[:n], im.reshape(-1)[:n]
