@@ -213,7 +213,7 @@ def default_by_tier(cases) -> dict:
     grouped by the tier its ``aberration_strength`` selects and, in a tier with a shortcut
     (``TierShortcut``), by whether the trial grid was kept (the headline times use Fig. 1
     only, which lies in tier 1)."""
-    from jmse_jax._merit import _tier_index
+    from jmse_jax._merit import _accepts, _tier_index
 
     value_fn = _jmse()
     vag_fn = jax.value_and_grad(value_fn, argnums=0)
@@ -227,7 +227,7 @@ def default_by_tier(cases) -> dict:
         if shortcut is not None:  # which grid the shortcut's rule returns
             trial, check = (float(jax.jit(_jmse(**g))(*case.arguments))
                             for g in (shortcut.trial, shortcut.check))
-            kept = abs(trial - check) <= shortcut.rtol * abs(trial)
+            kept = bool(_accepts(trial, check, shortcut.rtol))
             group = f"{tier}, trial kept" if kept else f"{tier}, own grid"
             grid = shortcut.trial if kept else grid
         grids[group] = grid

@@ -141,7 +141,7 @@ def summary(rows: list[dict]) -> str:
 
 def shortcut_summary(rows: list[dict]) -> list[str]:
     """How the middle tier's shortcut fares on the designs the default sends to that tier."""
-    from jmse_jax._merit import _tier_index
+    from jmse_jax._merit import _accepts, _tier_index
 
     shortcut = jj.DEFAULT_TIERS[1][3]
     trial_name = next(k for k in CANDIDATES if CANDIDATES[k] == shortcut.trial)
@@ -151,8 +151,8 @@ def shortcut_summary(rows: list[dict]) -> list[str]:
     for r in middle:
         trial, check = r["values"][trial_name], r["values"]["shortcut check"]
         difference = abs(trial - check) / abs(trial)
-        accepted = difference <= shortcut.rtol
-        if shortcut.rtol / 10 < difference:  # near the threshold, where the bound matters
+        accepted = bool(_accepts(trial, check, shortcut.rtol))
+        if shortcut.rtol / 10 < difference:  # near the threshold, where the ratio matters
             ratios.append(r["errors"][trial_name] / difference)
         if accepted:
             kept.append(r["errors"][trial_name])

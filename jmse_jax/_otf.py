@@ -217,8 +217,9 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
 
 
 def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False):
-    """Overlap-engine OTF at ``(nu_x, nu_y)``; ``remat``: reverse mode recomputes each block
-    of nodes instead of storing its chord moments (less memory, more time)."""
+    """Overlap-engine OTF at ``(nu_x, nu_y)``; ``remat``: when the nodes span several blocks,
+    reverse mode recomputes each block instead of storing its chord moments (less memory,
+    more time)."""
     n_phi, n_t = nodes
     dtype = common_dtype(aberrations, nu_x, nu_y, field)
     nu_x, nu_y = jnp.broadcast_arrays(jnp.asarray(nu_x, dtype), jnp.asarray(nu_y, dtype))
