@@ -75,8 +75,12 @@ def _commit() -> dict:
 
     # --no-optional-locks: read only, never refresh the index (another process may commit).
     status = git("--no-optional-locks", "status", "--porcelain", "--untracked-files=no")
-    return dict(commit=git("rev-parse", "HEAD"),
-                dirty=None if status is None else bool(status))
+    commit = git("rev-parse", "HEAD")
+    if commit is None and os.environ.get("JMSE_COMMIT"):
+        # A copy of the tree without .git (the lent GPU machine): the caller names the commit.
+        return dict(commit=os.environ["JMSE_COMMIT"],
+                    dirty=os.environ.get("JMSE_DIRTY", "0") not in ("", "0"))
+    return dict(commit=commit, dirty=None if status is None else bool(status))
 
 
 def load_average() -> dict:
@@ -109,6 +113,8 @@ def machine_info() -> dict:
         scipy_version=scipy.__version__,
         jmse_jax_version=jj.__version__,
         devices=[str(d) for d in jax.devices()],
+        backend=jax.default_backend(),
+        device_kind=jax.devices()[0].device_kind,
         dtype="float64" if jax.config.jax_enable_x64 else "float32",
         **_commit(),
         date=datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),

@@ -38,6 +38,8 @@ import jmse_jax as jj
 #: Most scratch memory a batch may use at once; larger batches are chunked (lax.map).
 BATCH_MEMORY_BYTES = 2 * 1024**3
 BATCH_SIZE = 625
+#: Designs per vmap in the batch on a GPU or TPU (the batch's memory stays a few GB).
+DEFAULT_ACCELERATOR_CHUNK = 125
 
 
 # --------------------------------------------------------------------------------------
@@ -188,7 +190,7 @@ def measure(method: Method, cases, timing_case, settings) -> dict:
     while n > 5 and n * value["warm_s"] > settings["batch_budget_s"]:
         n //= 5
     n = min(n, settings["batch_max"])
-    chunk = 1  # as sweep on CPU: one design at a time is fastest there
+    chunk = settings["batch_chunk"]  # as sweep: 1 (no vmap) on CPU, vmap on accelerators
     _, field, u, signal, noise = args
     expected = n * value["warm_s"]
     batch = common.time_compiled(_batch_function(method, field, u, signal, noise, chunk),
@@ -314,7 +316,10 @@ def markdown(report) -> str:
     lines = [
         "# JMSE accuracy and speed" + (" (quick subset)" if report["quick"] else ""),
         "",
-        f"{m['cpu_model']}, {m['cpu_count']} CPUs, jax {m['jax_version']}, {m['dtype']}, "
+        f"{m['cpu_model']}, {m['cpu_count']} CPUs"
+        + (f", **{m['device_kind']}** ({m['backend']})" if m.get("backend", "cpu") != "cpu"
+           else "")
+        + f", jax {m['jax_version']}, {m['dtype']}, "
         f"commit `{(m['commit'] or '?')[:10]}`{' (dirty tree)' if m['dirty'] else ''}, "
         f"{m['date']}. Load average at start {m['load_at_start']['load_1min']:.2f}, at end "
         f"{report['load_at_end']['load_1min']:.2f} (timings on a loaded machine are inflated).",
@@ -322,8 +327,11 @@ def markdown(report) -> str:
         f"Bank: {len(report['cases'])} cases, {report['converged_cases']} with a converged "
         f"reference (worst/median error over those); reference convergence up to "
         f"{_e(report['reference_convergence_max'])}. Times are warm medians of one evaluation "
-        f"on the Fig. 1 case; batch = {BATCH_SIZE} designs (`lax.map`, one design at a time "
-        "as `sweep` runs on CPU; `*` extrapolated from the timed sub-batch); value_and_grad "
+        f"on the Fig. 1 case; batch = {BATCH_SIZE} designs ("
+        + ("`lax.map`, one design at a time as `sweep` runs on CPU"
+           if report["settings"].get("batch_chunk", 1) == 1 else
+           f"`vmap` over {report['settings']['batch_chunk']} designs at a time")
+        + "; `*` extrapolated from the timed sub-batch); value_and_grad "
         "is with respect to the Seidel coefficients.",
         "",
     ]
@@ -463,12 +471,16 @@ def pareto_plot(rows, path, floor=1e-16):
 # --------------------------------------------------------------------------------------
 
 
-def run(quick: bool = False, only: list[str] | None = None) -> dict:
+def run(quick: bool = False, only: list[str] | None = None, tag: str = "",
+        batch_chunk: int | None = None) -> dict:
     start = time.perf_counter()
     machine = common.machine_info()
     settings = (dict(budget_s=0.5, batch_budget_s=2.0, batch_max=25, bank_limit=5)
                 if quick else dict(budget_s=2.0, batch_budget_s=5.0, batch_max=BATCH_SIZE,
                                    bank_limit=None))
+    if batch_chunk is None:  # sweep's default: one design at a time on CPU
+        batch_chunk = 1 if machine["backend"] == "cpu" else DEFAULT_ACCELERATOR_CHUNK
+    settings["batch_chunk"] = batch_chunk
     print("loading the problem bank ...", flush=True)
     cases = common.load_bank(limit=settings["bank_limit"],
                              reference_fallback="high" if quick else "strict")
@@ -508,7 +520,7 @@ def run(quick: bool = False, only: list[str] | None = None) -> dict:
         methods=rows, headlines=headlines(rows), default_by_tier=tiered,
         load_at_end=common.load_average(), seconds=time.perf_counter() - start,
     )
-    suffix = "_quick" if quick else ""
+    suffix = ("_quick" if quick else "") + (f"_{tag}" if tag else "")
     stem = common.RESULTS / f"accuracy_speed{suffix}"
     common.write_json(stem.with_suffix(".json"), report)
     stem.with_suffix(".md").write_text(markdown(report))
@@ -523,8 +535,12 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="a small subset (< 2 min)")
     parser.add_argument("--only", nargs="*", help="run only methods whose name contains one "
                         "of these words (development)")
+    parser.add_argument("--tag", default="", help="suffix of the output file names")
+    parser.add_argument("--batch-chunk", type=int, default=None,
+                        help="designs per vmap in the batch of 625 (default: 1, no vmap, on "
+                             f"CPU; {DEFAULT_ACCELERATOR_CHUNK} on accelerators)")
     args = parser.parse_args(argv)
-    run(quick=args.quick, only=args.only)
+    run(quick=args.quick, only=args.only, tag=args.tag, batch_chunk=args.batch_chunk)
     return 0
 
 

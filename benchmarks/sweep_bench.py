@@ -167,6 +167,10 @@ def _run_configuration(args, n_devices: int, mode: str) -> dict:
     return row
 
 
+def _distinct(rows, key) -> str:
+    return ", ".join(sorted({str(row[key]) for row in rows if key in row}))
+
+
 def _markdown(report: dict) -> str:
     machine = report["machine"]
     lines = [
@@ -176,13 +180,16 @@ def _markdown(report: dict) -> str:
         "",
         f"- machine: {machine.get('cpu_model')} ({machine.get('cpu_count')} CPUs), "
         f"{machine.get('platform')}",
+        f"- devices: {_distinct(report['rows'], 'device_kind')} "
+        f"({_distinct(report['rows'], 'platform')})",
         f"- jax {machine.get('jax_version')}, dtype {report.get('dtype', 'float64')}, "
         f"commit {machine.get('commit')}"
         f"{' (with uncommitted changes)' if machine.get('dirty') else ''}",
         f"- load average at start: {machine.get('load_at_start', {}).get('uptime')}",
         f"- jmse preset {report['preset']!r}, options {report['options']}, "
         f"batch_size {report['batch_size']} per device",
-        "- fake CPU devices share the same cores: more devices do not add compute here.",
+        ("- fake CPU devices share the same cores: more devices do not add compute here."
+         if all(r.get("platform", "cpu") == "cpu" for r in report["rows"]) else ""),
         "",
         "| mode | devices | designs | designs/s | run s | compile s | XLA temp MB/design "
         "| peak RSS MB | statuses |",
