@@ -17,6 +17,7 @@ from jax.custom_derivatives import SymbolicZero
 
 from ._aberrations import AbstractAberrations
 from ._numerics import (
+    EXACT,
     check_choice,
     check_count,
     check_finite_tree,
@@ -269,7 +270,7 @@ def _fine_parts(h, l_a, u, signal, noise, n_r, n_a, rows, dtype, adjoint):
     over at most a few dozen rows, so their summation order is fixed.
     """
     fine = polar_panels(u, n_r, n_a, dtype, rows=rows, n_outer=_OUTER_NODES)
-    h = jnp.matmul(l_a, h)
+    h = jnp.matmul(l_a, h, precision=EXACT)
     h_re, h_im = h[..., :n_r], h[..., n_r:]
     s_x = _signal_at(signal, fine, outer=False)
     s_n = noise(fine.nu_x, fine.nu_y)
@@ -282,7 +283,7 @@ def _fine_parts(h, l_a, u, signal, noise, n_r, n_a, rows, dtype, adjoint):
     # dS_e/dRe(H) + i dS_e/dIm(H) = -2 S_x^2 S_n H / D^2 = -2 (S_e S_x / D) H.
     coefficient = -2.0 * fine.weights * s_e * s_x / denominator
     g = jnp.concatenate([coefficient * h_re, coefficient * h_im], axis=-1)
-    return value, jnp.matmul(l_a.T, g)
+    return value, jnp.matmul(l_a.T, g, precision=EXACT)
 
 
 def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
@@ -299,7 +300,7 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
     # products XLA's threaded GEMM summed in an order that depended on the program and
     # broke the bit-for-bit equality of sweeps across device counts. The angular products,
     # inside the blocks, contract over a few dozen rows and are real (``_fine_parts``).
-    h = jnp.matmul(h_coarse, jnp.asarray(l_r.T, dtype))
+    h = jnp.matmul(h_coarse, jnp.asarray(l_r.T, dtype), precision=EXACT)
     h = jnp.concatenate([jnp.real(h), jnp.imag(h)], axis=-1)
     total = jnp.zeros((), dtype)
     back = jnp.zeros(h.shape, h.dtype) if adjoint else None
@@ -321,7 +322,7 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
     if not adjoint:
         return total
     back = jax.lax.complex(back[..., :n_r], back[..., n_r:])
-    return total, jnp.matmul(back, jnp.asarray(l_r, dtype))
+    return total, jnp.matmul(back, jnp.asarray(l_r, dtype), precision=EXACT)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5, 6))
@@ -565,9 +566,11 @@ def _switched_merit_jvp(static, primals, tangents):
     _, d_operands = tangents
     branches = [functools.partial(_tier_value_and_grad, plan, dtype) for plan in plans]
     value, gradient = jax.lax.switch(index, branches, operands)
-    terms = [jnp.sum(g * t) for g, t in zip(jax.tree_util.tree_leaves(gradient),
-                                             jax.tree_util.tree_leaves(d_operands),
-                                             strict=True)]
+    # Operands wider than the computation (a float64 signal in a float32 merit) contribute
+    # in their own dtype; the tangent takes the value's.
+    terms = [jnp.sum(g * t).astype(value.dtype)
+             for g, t in zip(jax.tree_util.tree_leaves(gradient),
+                             jax.tree_util.tree_leaves(d_operands), strict=True)]
     return value, sum(terms, jnp.zeros_like(value))
 
 

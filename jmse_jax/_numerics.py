@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 __all__ = [
+    "EXACT",
     "abs2",
     "barycentric_matrix",
     "check_choice",
@@ -31,6 +32,13 @@ __all__ = [
     "safe_norm",
     "safe_sqrt",
 ]
+
+
+#: Precision of every matrix product in the pipeline. On GPUs and TPUs JAX's default runs
+#: float32 products on reduced-precision units (TF32, bfloat16 passes), which put relative
+#: errors of about 5e-4 into a float32 JMSE (measured on an H100); full precision keeps
+#: float32 within about 1e-6 of float64. CPUs compute every product in full precision.
+EXACT = jax.lax.Precision.HIGHEST
 
 
 # --------------------------------------------------------------------------------------

@@ -38,6 +38,7 @@ import numpy as np
 from ._aberrations import AbstractAberrations
 from ._chords import chord_integral
 from ._numerics import (
+    EXACT,
     barycentric_matrix,
     check_choice,
     check_count,
@@ -117,9 +118,9 @@ def _phase_integral(phase, weights, interp, moment):
 
 
 def _phase_moments(phase, interp, moment):
-    cos_p, sin_p = cos_sin_2pi(jnp.einsum("...q,jq->...j", phase, interp))
-    cos_m = jnp.einsum("...j,jq->...q", cos_p, moment)
-    sin_m = jnp.einsum("...j,jq->...q", sin_p, moment)
+    cos_p, sin_p = cos_sin_2pi(jnp.einsum("...q,jq->...j", phase, interp, precision=EXACT))
+    cos_m = jnp.einsum("...j,jq->...q", cos_p, moment, precision=EXACT)
+    sin_m = jnp.einsum("...j,jq->...q", sin_p, moment, precision=EXACT)
     return cos_m, sin_m
 
 
@@ -294,7 +295,7 @@ def _otf_nudft(aberrations, nu_x, nu_y, field, B):
     ang_y = scale * flat_y[:, None] * m[None, :]
     ex = jax.lax.complex(jnp.cos(ang_x), jnp.sin(ang_x))
     ey = jax.lax.complex(jnp.cos(ang_y), jnp.sin(ang_y))
-    rows = ey @ psf.astype(ex.dtype)  # (N, 2B): sum over y frequencies
+    rows = jnp.matmul(ey, psf.astype(ex.dtype), precision=EXACT)  # (N, 2B): sum over y
     values = jnp.sum(rows * ex, axis=1) / jnp.sum(psf)
     return values.reshape(nu_x.shape)
 

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._aberrations import AbstractAberrations, Zernike, noll_to_nm, wavefront, zernike_polynomial
-from ._numerics import check_count, gauss_legendre
+from ._numerics import EXACT, check_count, gauss_legendre
 
 __all__ = ["PolarGrid", "SquareGrid", "sample_opd", "zernike_fit"]
 
@@ -136,6 +136,6 @@ def zernike_fit(samples, grid: PupilGrid, noll=None) -> Zernike:
     weighted = samples * jnp.asarray(grid.weights, dtype) / math.pi
     basis = jnp.stack([zernike_polynomial(j, jnp.asarray(grid.x, dtype), jnp.asarray(grid.y, dtype))
                        for j in noll])
-    coefficients = jnp.tensordot(basis, weighted, axes=weighted.ndim)
+    coefficients = jnp.tensordot(basis, weighted, axes=weighted.ndim, precision=EXACT)
     return Zernike(coefficients, noll=noll)
 

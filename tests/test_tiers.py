@@ -164,3 +164,36 @@ def test_sweep_runs_designs_one_by_one_on_cpu_and_equals_the_loop():
     assert result.metadata["batch_size"] == 1
     loop = [float(jmse_fn()(a, f, 0.2, SIGNAL, NOISE)) for a, f, _, _ in DESIGNS]
     np.testing.assert_allclose(result.value, loop, rtol=1e-12)
+
+
+# Small tiers with the same structure as the default's (a switch, and a shortcut in the tier
+# the Fig. 1 point selects), cheap to compile.
+_SMALL = dict(nodes=(12, 6), se_nodes=(60, 24), overlap_nodes=(10, 10))
+SMALL_TIERS = (
+    (1.0, math.inf, dict(nodes=(8, 4), se_nodes=(40, 16), overlap_nodes=(8, 8)), None),
+    (math.inf, math.inf, _SMALL,
+     jj.TierShortcut(trial=dict(nodes=(8, 4), se_nodes=(40, 16), overlap_nodes=(8, 8)),
+                     check=dict(nodes=(6, 4), se_nodes=(30, 12), overlap_nodes=(6, 6)),
+                     rtol=1e-5)),
+)
+
+
+def test_float32_design_with_float64_spectra_differentiates(monkeypatch):
+    """A float32 design with the signal and noise given as Python floats (float64 with x64
+    on): the tier switch's derivative rule returns a float32 tangent (it raised a dtype
+    error), and value and gradient equal the float64 ones to float32 accuracy."""
+    monkeypatch.setitem(jj.PRESETS["default"], "tiers", SMALL_TIERS)
+    ab, field, u, _ = DESIGNS[1]
+    vag = jax.jit(jax.value_and_grad(lambda a, f: jj.jmse(a, f, u, SIGNAL, NOISE)))
+    value32, grad32 = vag(jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32), ab),
+                          jnp.float32(field))
+    value64, grad64 = vag(jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float64), ab),
+                          jnp.float64(field))
+    # The oracle: the fixed grid the tier runs (its shortcut is refused on such coarse grids).
+    expected = _fixed(ab, field, u, _SMALL)
+    assert value32.dtype == jnp.float32 and grad32.w020.dtype == jnp.float32
+    assert float(value64) == pytest.approx(expected, rel=1e-13)
+    assert float(value32) == pytest.approx(expected, rel=1e-5)
+    for name in ("w020", "w040", "w131", "w222", "w220"):
+        np.testing.assert_allclose(getattr(grad32, name), getattr(grad64, name),
+                                   rtol=1e-4, atol=1e-5 * expected)
