@@ -74,13 +74,13 @@ def _commit() -> dict:
             return None
 
     # --no-optional-locks: read only, never refresh the index (another process may commit).
-    status = git("--no-optional-locks", "status", "--porcelain", "--untracked-files=no")
-    commit = git("rev-parse", "HEAD")
-    if commit is None and os.environ.get("JMSE_COMMIT"):
-        # A copy of the tree without .git (the lent GPU machine): the caller names the commit.
+    if os.environ.get("JMSE_COMMIT"):
+        # A copy of the tree whose .git is missing or stale (the lent GPU machine's): the
+        # caller names the commit.
         return dict(commit=os.environ["JMSE_COMMIT"],
                     dirty=os.environ.get("JMSE_DIRTY", "0") not in ("", "0"))
-    return dict(commit=commit, dirty=None if status is None else bool(status))
+    status = git("--no-optional-locks", "status", "--porcelain", "--untracked-files=no")
+    return dict(commit=git("rev-parse", "HEAD"), dirty=None if status is None else bool(status))
 
 
 def load_average() -> dict:

@@ -13,7 +13,7 @@
 #   sweep32     the same in float32
 #   sweepbs     the fast preset, float64, at batch sizes 64 and 256
 #   sweepdef    the default (adaptive) preset, float64, 256 designs per vmap
-#   speed       benchmarks/accuracy_speed.py on the baselines and the presets
+#   speed       benchmarks/accuracy_speed.py on the baselines, fast and default presets
 # Results (JSON, markdown, PNG) are written to benchmarks/results/*gpu*, and copied with
 # the log into $OUT/gpu_results.tgz after every phase, so a phase cut short keeps the rest.
 set -u
@@ -60,8 +60,8 @@ for name in "$@"; do
             phase sweepdef 300 $SWEEP gpu_default --preset default --batch-size 256 \
                 --timeout 140 ;;
         speed)
-            phase speed 420 $PY benchmarks/accuracy_speed.py --tag gpu \
-                --only baseline fast default high ;;
+            phase speed 540 $PY benchmarks/accuracy_speed.py --tag gpu \
+                --only baseline fast default ;;
         *) echo "unknown phase $name" | tee -a "$LOG" ;;
     esac
 done
