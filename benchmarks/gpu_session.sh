@@ -13,6 +13,8 @@
 #   sweep32     the same in float32
 #   sweepbs     the fast preset, float64, at batch sizes 64 and 256
 #   sweepdef    the default (adaptive) preset, float64, 256 designs per vmap
+#   sweepdef1   the default preset, float64, one design at a time (lax.map, no vmap)
+#   sweepdefgrad  the default preset's gradient sweep, 256 designs per vmap, long limit
 #   speed       benchmarks/accuracy_speed.py on the baselines, fast and default presets
 # Results (JSON, markdown, PNG) are written to benchmarks/results/*gpu*, and copied with
 # the log into $OUT/gpu_results.tgz after every phase, so a phase cut short keeps the rest.
@@ -59,6 +61,12 @@ for name in "$@"; do
         sweepdef)
             phase sweepdef 300 $SWEEP gpu_default --preset default --batch-size 256 \
                 --timeout 140 ;;
+        sweepdef1)
+            phase sweepdef1 150 $SWEEP gpu_default_b1 --preset default --batch-size 1 \
+                --repeats 1 --timeout 70 ;;
+        sweepdefgrad)
+            phase sweepdefgrad 330 $SWEEP gpu_default_grad --preset default --batch-size 256 \
+                --modes grad --repeats 1 --timeout 320 ;;
         speed)
             phase speed 540 $PY benchmarks/accuracy_speed.py --tag gpu \
                 --only baseline fast default ;;
