@@ -13,6 +13,7 @@
 #   sweep32     the same in float32
 #   sweepbs     the fast preset, float64, at batch sizes 64 and 256
 #   sweepdef    the default (adaptive) preset, float64, 256 designs per vmap
+#   sweepdefbs  the default preset, float64, 64 and 256 designs per vmap, one run each
 #   sweepdef1   the default preset, float64, one design at a time (lax.map, no vmap)
 #   sweepdefgrad  the default preset's gradient sweep, 256 designs per vmap, long limit
 #   speed       benchmarks/accuracy_speed.py on the baselines, fast and default presets
@@ -61,6 +62,11 @@ for name in "$@"; do
         sweepdef)
             phase sweepdef 300 $SWEEP gpu_default --preset default --batch-size 256 \
                 --timeout 140 ;;
+        sweepdefbs)
+            phase sweepdef64 170 $SWEEP gpu_default_b64 --preset default --batch-size 64 \
+                --repeats 1 --timeout 120
+            phase sweepdef256 170 $SWEEP gpu_default_b256 --preset default --batch-size 256 \
+                --repeats 1 --timeout 120 ;;
         sweepdef1)
             phase sweepdef1 150 $SWEEP gpu_default_b1 --preset default --batch-size 1 \
                 --repeats 1 --timeout 70 ;;

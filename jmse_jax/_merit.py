@@ -512,10 +512,82 @@ def _switched_merit(static, index, operands):
     selected branch computes its value and gradient together, and the tangent is their
     inner product with the input tangents, outside the switch (forward and reverse mode).
     The gradient is that of the grid whose value is returned.
+
+    Under ``vmap`` (``_dispatch``) each tier runs, for the whole batch, only when one of
+    the batch's designs selects it, and a shortcut's own grid only when one of them refuses
+    the trial.
     """
     plans, dtype = static.value
-    return jax.lax.switch(index, [functools.partial(_tier_value, plan, dtype)
-                                  for plan in plans], operands)
+    return _dispatch(plans, dtype, with_grad=False)(index, operands)
+
+
+def _dispatch(plans, dtype, with_grad):
+    """``lax.switch`` over the tiers (their value, or value and gradient), with a batching
+    rule that skips the tiers a batch does not use.
+
+    ``vmap`` of a ``lax.switch`` or ``lax.cond`` whose index is batched evaluates every
+    branch for every design and selects. The rule instead runs each tier, vectorised over
+    the whole batch, inside a ``lax.cond`` on whether any design selects it (an unbatched
+    predicate, so the other tiers are skipped), and selects each design's result from its
+    own tier. In a tier with a shortcut the trial and check run for the batch, and the own
+    grid only if a design of the tier refuses its trial. Each design gets exactly what it
+    gets alone; a batch of designs from one tier costs one tier.
+    """
+    single = _tier_value_and_grad if with_grad else _tier_value
+    branches = [functools.partial(single, plan, dtype) for plan in plans]
+
+    @jax.custom_batching.custom_vmap
+    def run(index, operands):
+        return jax.lax.switch(index, branches, operands)
+
+    @run.def_vmap
+    def run_batched(axis_size, in_batched, index, operands):
+        index_batched, operands_batched = in_batched
+
+        def spread(x, batched):
+            return x if batched else jnp.broadcast_to(x, (axis_size, *jnp.shape(x)))
+
+        index = spread(index, index_batched)
+        operands = jax.tree_util.tree_map(spread, operands, operands_batched)
+        shape = jax.eval_shape(jax.vmap(branches[0]), operands)
+        zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shape)
+        out = zeros
+        for tier, plan in enumerate(plans):
+            mask = index == tier
+            result = _batched_tier(plan, dtype, with_grad, mask, operands, zeros)
+            out = jax.tree_util.tree_map(functools.partial(_select, mask), result, out)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return run
+
+
+def _select(mask, chosen, other):
+    return jnp.where(mask.reshape(mask.shape + (1,) * (chosen.ndim - 1)), chosen, other)
+
+
+def _batched_tier(plan, dtype, with_grad, mask, operands, zeros):
+    """One tier for a whole batch, skipped (zeros) unless a design in ``mask`` needs it."""
+    grid, shortcut = plan
+
+    def merit(options):
+        fn = functools.partial(_apply_merit, options, dtype)
+        return jax.vmap(jax.value_and_grad(fn) if with_grad else fn)
+
+    def skip(ops):
+        return zeros
+
+    if shortcut is None:
+        return jax.lax.cond(jnp.any(mask), merit(grid), skip, operands)
+    trial_grid, check_grid, rtol = shortcut
+
+    def with_shortcut(ops):
+        trial = merit(trial_grid)(ops)
+        check = jax.vmap(functools.partial(_apply_merit, check_grid, dtype))(ops)
+        accepted = _accepts(trial[0] if with_grad else trial, check, rtol)
+        own = jax.lax.cond(jnp.any(mask & ~accepted), merit(grid), skip, ops)
+        return jax.tree_util.tree_map(functools.partial(_select, accepted), trial, own)
+
+    return jax.lax.cond(jnp.any(mask), with_shortcut, skip, operands)
 
 
 def _apply_merit(grid, dtype, operands):
@@ -564,8 +636,7 @@ def _switched_merit_jvp(static, primals, tangents):
     plans, dtype = static.value
     index, operands = primals
     _, d_operands = tangents
-    branches = [functools.partial(_tier_value_and_grad, plan, dtype) for plan in plans]
-    value, gradient = jax.lax.switch(index, branches, operands)
+    value, gradient = _dispatch(plans, dtype, with_grad=True)(index, operands)
     # Operands wider than the computation (a float64 signal in a float32 merit) contribute
     # in their own dtype; the tangent takes the value's.
     terms = [jnp.sum(g * t).astype(value.dtype)
@@ -612,9 +683,10 @@ def jmse(
         tier's grid and keeps its value when a coarse check grid agrees with it to 1e-5
         (``TierShortcut``): about half of that tier's designs, the paper's Fig. 1 point
         among them, then cost what the first tier costs, and the others pay the two cheap
-        grids on top of their own. Under ``vmap`` every tier (and both sides of the
-        shortcut) is evaluated and the right one selected (``sweep`` runs designs one by one
-        on CPU, which avoids that). The value can jump, within the tolerance, where a
+        grids on top of their own. Under ``vmap`` a tier runs, for the whole batch, only
+        if one of the batch's designs selects it (and a shortcut's own grid only if one
+        refuses the trial), so a batch of similar designs costs one tier; each design gets
+        what it gets alone. The value can jump, within the tolerance, where a
         design crosses a tier bound or the shortcut's threshold; an optimiser wants a fixed
         grid (``"fast"``, ``optimise``'s default). Setting
         any grid option (``quadrature``, ``nodes``, ``se_nodes``, ``otf_method``,

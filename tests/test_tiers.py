@@ -197,3 +197,46 @@ def test_float32_design_with_float64_spectra_differentiates(monkeypatch):
     for name in ("w020", "w040", "w131", "w222", "w220"):
         np.testing.assert_allclose(getattr(grad32, name), getattr(grad64, name),
                                    rtol=1e-4, atol=1e-5 * expected)
+
+
+def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch):
+    """Under vmap (value and value_and_grad) every design gets its own tier's grid, in a batch
+    that mixes tiers, holds one design that keeps the shortcut's trial and one that refuses
+    it, and leaves one tier unused (the batching rule skips tiers and grids no design needs).
+    The oracle is the unbatched evaluation, which the tests above check grid by grid."""
+    trial = dict(nodes=(8, 4), se_nodes=(40, 16), overlap_nodes=(8, 8))
+    check = dict(nodes=(6, 4), se_nodes=(30, 12), overlap_nodes=(6, 6))
+    middle = [DESIGNS[1], DEFOCUS_M6]  # both in the middle tier below
+    disagreement = [abs(_fixed(ab, f, u, trial) / _fixed(ab, f, u, check) - 1.0)
+                    for ab, f, u, _ in middle]
+    rtol = math.sqrt(disagreement[0] * disagreement[1])  # one keeps the trial, one refuses
+    assert min(disagreement) < rtol < max(disagreement)
+    tiers = (
+        (1.0, math.inf, trial, None),
+        (10.0, math.inf, _SMALL, jj.TierShortcut(trial=trial, check=check, rtol=rtol)),
+        (12.0, math.inf, dict(nodes=(14, 8), se_nodes=(70, 28), overlap_nodes=(12, 12)), None),
+        (math.inf, math.inf, dict(nodes=(16, 8), se_nodes=(80, 32), overlap_nodes=(12, 12)),
+         None),
+    )
+    monkeypatch.setitem(jj.PRESETS["default"], "tiers", tiers)
+    designs = [DESIGNS[0], *middle, DESIGNS[2]]  # strengths 0.2, 3.1, 3.4, 14.7: tier 2 unused
+    assert [int(_tier_index(float(jj.aberration_strength(ab, f, u)), u, tiers))
+            for ab, f, u, _ in designs] == [0, 1, 1, 3]
+    batch = jax.tree_util.tree_map(lambda *x: jnp.stack([jnp.asarray(v, jnp.float64) for v in x]),
+                                   *[jj.Seidel(**_coefficients(d[0])) for d in designs])
+    field = jnp.asarray([d[1] for d in designs])
+
+    def merit(a, f):
+        return jj.jmse(a, f, 0.2, SIGNAL, NOISE)
+
+    values = jax.jit(jax.vmap(merit))(batch, field)
+    batched_value, (batched_grad, batched_field_grad) = jax.jit(
+        jax.vmap(jax.value_and_grad(merit, argnums=(0, 1))))(batch, field)
+    single = jax.jit(jax.value_and_grad(merit, argnums=(0, 1)))
+    for i, (ab, f, _, _) in enumerate(designs):
+        value, (grad, field_grad) = single(jj.Seidel(**_coefficients(ab)), jnp.float64(f))
+        np.testing.assert_allclose([values[i], batched_value[i]], float(value), rtol=1e-13)
+        np.testing.assert_allclose(batched_field_grad[i], field_grad, rtol=1e-10, atol=1e-14)
+        for name in ("w020", "w040", "w131", "w222", "w220"):
+            np.testing.assert_allclose(getattr(batched_grad, name)[i], getattr(grad, name),
+                                       rtol=1e-10, atol=1e-14)
