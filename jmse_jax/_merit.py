@@ -536,11 +536,24 @@ def _dispatch(plans, dtype, with_grad):
     single = _tier_value_and_grad if with_grad else _tier_value
     branches = [functools.partial(single, plan, dtype) for plan in plans]
 
-    @jax.custom_batching.custom_vmap
-    def run(index, operands):
+    def switch(index, operands):
         return jax.lax.switch(index, branches, operands)
 
-    @run.def_vmap
+    # Derivatives of the dispatch itself (second derivatives of ``jmse``, e.g. a Hessian)
+    # differentiate the plain switch: ``custom_vmap`` has no rule for them.
+    @jax.custom_jvp
+    def run(index, operands):
+        return batched(index, operands)
+
+    @run.defjvp
+    def run_jvp(primals, tangents):
+        return jax.jvp(switch, primals, tangents)
+
+    @jax.custom_batching.custom_vmap
+    def batched(index, operands):
+        return switch(index, operands)
+
+    @batched.def_vmap
     def run_batched(axis_size, in_batched, index, operands):
         index_batched, operands_batched = in_batched
 

@@ -240,3 +240,24 @@ def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch):
         for name in ("w020", "w040", "w131", "w222", "w220"):
             np.testing.assert_allclose(getattr(batched_grad, name)[i], getattr(grad, name),
                                        rtol=1e-10, atol=1e-14)
+
+
+def test_second_derivatives_of_the_default(monkeypatch):
+    """The Hessian of the default (forward over reverse through the tier switch and its
+    batching rule) equals central differences of its gradient, in a tier with a shortcut
+    (it raised an error when the batching rule was first added)."""
+    monkeypatch.setitem(jj.PRESETS["default"], "tiers", SMALL_TIERS)
+    ab, field, u, _ = DESIGNS[1]
+    base = _coefficients(ab)
+
+    def merit(x):
+        return jj.jmse(jj.Seidel(**{**base, "w020": x[0], "w222": x[1]}), field, u,
+                       SIGNAL, NOISE)
+
+    x = jnp.asarray([base["w020"], base["w222"]], jnp.float64)
+    hessian = jax.jit(jax.hessian(merit))(x)
+    gradient = jax.jit(jax.grad(merit))
+    h = 1e-4
+    columns = [(gradient(x + h * e) - gradient(x - h * e)) / (2 * h) for e in jnp.eye(2)]
+    np.testing.assert_allclose(hessian, jnp.stack(columns, axis=1), rtol=1e-5,
+                               atol=1e-7 * float(jnp.max(jnp.abs(hessian))))
