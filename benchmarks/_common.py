@@ -73,12 +73,12 @@ def _commit() -> dict:
         except (OSError, subprocess.CalledProcessError):
             return None
 
-    # --no-optional-locks: read only, never refresh the index (another process may commit).
     if os.environ.get("JMSE_COMMIT"):
         # A copy of the tree whose .git is missing or stale (the lent GPU machine's): the
         # caller names the commit.
         return dict(commit=os.environ["JMSE_COMMIT"],
                     dirty=os.environ.get("JMSE_DIRTY", "0") not in ("", "0"))
+    # --no-optional-locks: read only, never refresh the index (another process may commit).
     status = git("--no-optional-locks", "status", "--porcelain", "--untracked-files=no")
     return dict(commit=git("rev-parse", "HEAD"), dirty=None if status is None else bool(status))
 

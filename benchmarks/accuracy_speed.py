@@ -34,12 +34,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import jmse_jax as jj
+from jmse_jax._sweep import DEFAULT_ACCELERATOR_BATCH
 
-#: Most scratch memory a batch may use at once; larger batches are chunked (lax.map).
-BATCH_MEMORY_BYTES = 2 * 1024**3
 BATCH_SIZE = 625
-#: Designs per vmap in the batch on a GPU or TPU (the batch's memory stays a few GB).
-DEFAULT_ACCELERATOR_CHUNK = 125
 
 
 # --------------------------------------------------------------------------------------
@@ -478,8 +475,8 @@ def run(quick: bool = False, only: list[str] | None = None, tag: str = "",
     settings = (dict(budget_s=0.5, batch_budget_s=2.0, batch_max=25, bank_limit=5)
                 if quick else dict(budget_s=2.0, batch_budget_s=5.0, batch_max=BATCH_SIZE,
                                    bank_limit=None))
-    if batch_chunk is None:  # sweep's default: one design at a time on CPU
-        batch_chunk = 1 if machine["backend"] == "cpu" else DEFAULT_ACCELERATOR_CHUNK
+    if batch_chunk is None:  # sweep's default: one design at a time on CPU, else vmap
+        batch_chunk = 1 if machine["backend"] == "cpu" else DEFAULT_ACCELERATOR_BATCH
     settings["batch_chunk"] = batch_chunk
     print("loading the problem bank ...", flush=True)
     cases = common.load_bank(limit=settings["bank_limit"],
@@ -538,7 +535,7 @@ def main(argv=None) -> int:
     parser.add_argument("--tag", default="", help="suffix of the output file names")
     parser.add_argument("--batch-chunk", type=int, default=None,
                         help="designs per vmap in the batch of 625 (default: 1, no vmap, on "
-                             f"CPU; {DEFAULT_ACCELERATOR_CHUNK} on accelerators)")
+                             f"CPU; sweep's {DEFAULT_ACCELERATOR_BATCH} on accelerators)")
     args = parser.parse_args(argv)
     run(quick=args.quick, only=args.only, tag=args.tag, batch_chunk=args.batch_chunk)
     return 0

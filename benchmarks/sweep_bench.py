@@ -188,8 +188,11 @@ def _markdown(report: dict) -> str:
         f"- load average at start: {machine.get('load_at_start', {}).get('uptime')}",
         f"- jmse preset {report['preset']!r}, options {report['options']}, "
         f"batch_size {report['batch_size']} per device",
-        ("- fake CPU devices share the same cores: more devices do not add compute here."
-         if all(r.get("platform", "cpu") == "cpu" for r in report["rows"]) else ""),
+    ]
+    if all(row.get("platform", "cpu") == "cpu" for row in report["rows"]):
+        lines.append("- fake CPU devices share the same cores: more devices do not add "
+                     "compute here.")
+    lines += [
         "",
         "| mode | devices | designs | designs/s | run s | compile s | XLA temp MB/design "
         "| peak RSS MB | statuses |",
