@@ -19,8 +19,10 @@ install: $(BIN)/.installed
 run: $(BIN)/.installed
 	$(BIN)/jmse-jax reproduce --out $(OUT)
 
+# Two or more worker processes (one per core, whole test files each): compilation, which
+# dominates the suite, is single-threaded in XLA, so the workers overlap it.
 test: $(BIN)/.installed
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto --dist loadfile
 
 lint: $(BIN)/.installed
 	$(BIN)/ruff check jmse_jax tests benchmarks notebooks
