@@ -23,6 +23,7 @@ from ._numerics import (
     check_finite_tree,
     check_range,
     common_dtype,
+    gauss_legendre,
     is_concrete,
 )
 from ._otf import OTF_METHODS, _otf_fft, _otf_nudft, _otf_overlap, otf_fft_grid
@@ -237,18 +238,16 @@ _OUTER_NODES = 48
 
 
 def _fine_blocks(n_r, n_a):
-    """Equal blocks of angular rows of the fine S_e grid, each under ``_FINE_BLOCK_POINTS``.
+    """``(n_blocks, size)``: equal blocks of angular rows of the fine S_e grid, each under
+    ``_FINE_BLOCK_POINTS`` nodes (the last padded with ``n_blocks * size - n_a`` rows).
 
     XLA's CPU runtime allocates a call's scratch afresh; above about 32 MB the pages come
     freshly mapped and every first touch faults (about 1 us per 4 kB page), which cost the
     strongly aberrated tiers up to a third of their time. Blocks keep each temporary small.
-    They are unrolled: a ``lax.map`` loop measured much slower, and so did
-    ``jax.checkpoint`` around each block in reverse mode (benchmarks/README.md).
     """
     per_block = max(1, _FINE_BLOCK_POINTS // (2 * n_r))
     n_blocks = -(-n_a // per_block)
-    size = -(-n_a // n_blocks)
-    return [(start, min(start + size, n_a)) for start in range(0, n_a, size)]
+    return n_blocks, -(-n_a // n_blocks)
 
 
 def _signal_at(signal, panels, outer):
@@ -260,16 +259,18 @@ def _signal_at(signal, panels, outer):
     return signal(panels.nu_x, panels.nu_y)
 
 
-def _fine_parts(h, l_a, u, signal, noise, n_r, n_a, rows, dtype, adjoint):
-    """``sum w S_e`` over the angular ``rows`` of the fine grid (and their outer nodes); with
-    ``adjoint``, also ``L_a^T g`` where ``g = w dS_e/dRe(H) + i w dS_e/dIm(H)``.
+def _fine_parts(h, l_a, u, signal, noise, n_r, n_a, angles, dtype, adjoint):
+    """``sum w S_e`` over a block of angular rows of the fine grid (``angles``: their angle
+    fractions and weights; ``l_a``: their rows of the angular interpolation matrix) and their
+    outer nodes; with ``adjoint``, also ``L_a^T g`` where
+    ``g = w dS_e/dRe(H) + i w dS_e/dIm(H)``.
 
     ``h`` holds the radially interpolated OTF as real numbers, ``(2, n_coarse, 2 n_r)`` with
     the real parts first: the real matrix ``l_a`` then takes real products (half the flops
     of complex ones), and the adjoint comes back in the same layout. These products contract
     over at most a few dozen rows, so their summation order is fixed.
     """
-    fine = polar_panels(u, n_r, n_a, dtype, rows=rows, n_outer=_OUTER_NODES)
+    fine = polar_panels(u, n_r, n_a, dtype, n_outer=_OUTER_NODES, angles=angles)
     h = jnp.matmul(l_a, h, precision=EXACT)
     h_re, h_im = h[..., :n_r], h[..., n_r:]
     s_x = _signal_at(signal, fine, outer=False)
@@ -302,23 +303,35 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
     # inside the blocks, contract over a few dozen rows and are real (``_fine_parts``).
     h = jnp.matmul(h_coarse, jnp.asarray(l_r.T, dtype), precision=EXACT)
     h = jnp.concatenate([jnp.real(h), jnp.imag(h)], axis=-1)
-    total = jnp.zeros((), dtype)
-    back = jnp.zeros(h.shape, h.dtype) if adjoint else None
-    for start, stop in _fine_blocks(n_r, n_a):
-        # A zero computed from the running total orders the blocks: XLA would otherwise
-        # start every block's products and node arrays at once and keep them all alive
-        # (an optimization_barrier does not survive XLA's CPU pipeline).
-        zero = jax.lax.stop_gradient(jnp.minimum(jnp.abs(total), 0.0))
-        rows_l = jax.lax.stop_gradient(jnp.asarray(l_a[start:stop], dtype) + zero)
-        part = _fine_parts(h, rows_l, u + zero, signal, noise, n_r, n_a, (start, stop), dtype,
+    # The blocks run one after another in a loop, so the program holds one block, not one
+    # copy per block: an unrolled version took 21 s to trace and compile the default's
+    # value_and_grad against 13 s, at the same run time (benchmarks/README.md). Padded rows
+    # carry zero weight and zero interpolation rows, so they add exact zeros.
+    n_blocks, size = _fine_blocks(n_r, n_a)
+    pad = n_blocks * size - n_a
+    frac, w_frac = gauss_legendre(n_a, 0.0, 1.0)
+    rows = (
+        np.concatenate([l_a, np.zeros((pad, l_a.shape[1]))]).reshape(n_blocks, size, -1),
+        np.concatenate([frac, np.full(pad, 0.5)]).reshape(n_blocks, size),
+        np.concatenate([w_frac, np.zeros(pad)]).reshape(n_blocks, size),
+    )
+
+    def block(carry, rows):
+        total, back = carry
+        rows_l, frac, w_frac = rows
+        part = _fine_parts(h, rows_l, u, signal, noise, n_r, n_a, (frac, w_frac), dtype,
                            adjoint)
         if adjoint:
             part, block_back = part
             back = back + block_back
-            # The adjoint products join the chain too, or XLA defers them to the end and
-            # keeps every block's g alive (tens of MB on the finest grids).
-            part = part + jax.lax.stop_gradient(jnp.minimum(jnp.abs(back[0, 0, 0]), 0.0))
-        total = total + part
+        return (total + part, back), None
+
+    carry = (jnp.zeros((), dtype), jnp.zeros(h.shape if adjoint else (), h.dtype))
+    rows = tuple(jnp.asarray(a, dtype) for a in rows)
+    if n_blocks == 1:
+        (total, back), _ = block(carry, tuple(a[0] for a in rows))
+    else:
+        (total, back), _ = jax.lax.scan(block, carry, rows)
     if not adjoint:
         return total
     back = jax.lax.complex(back[..., :n_r], back[..., n_r:])

@@ -134,17 +134,18 @@ class PolarPanels(NamedTuple):
     outer_radius: jax.Array
 
 
-def polar_panels(u, n_radial: int, n_angular: int, dtype=None, rows=None,
-                 n_outer: int | None = None) -> PolarPanels:
+def polar_panels(u, n_radial: int, n_angular: int, dtype=None, n_outer: int | None = None,
+                 angles=None) -> PolarPanels:
     """Polar Gauss panel rule over the folded band for Nyquist ratio ``u`` (traced).
 
     Triangle 1 holds angles ``alpha in [0, pi/4]`` from the ``nu_x`` axis, where a ray ends at
     ``r_max = u / cos(alpha)``; triangle 2 is its mirror image in the diagonal. Along each ray
     ``r = t R`` with ``R = min(r_max, 1)`` and ``t`` on a composite Gauss rule (panels
     ``_RADIAL_EDGES``), and the part beyond the cutoff ``[R, r_max]`` has its own nodes.
-    ``rows = (start, stop)`` keeps only those angular rows (static ints). ``n_outer`` sets a
-    separate Gauss rule of that many nodes for the part beyond the cutoff (default: the
-    inner rule), where the integrand is the smooth ``S_x`` alone.
+    ``n_outer`` sets a separate Gauss rule of that many nodes for the part beyond the cutoff
+    (default: the inner rule), where the integrand is the smooth ``S_x`` alone.
+    ``angles = (frac, w_frac)`` replaces the ``n_angular`` Gauss rows by the given angle
+    fractions (of the triangle's ``pi/4``) and weights, e.g. one block of rows inside a loop.
     """
     dtype = dtype or jnp.result_type(float)
     t, w_t = (jnp.asarray(a, dtype) for a in _radial_rule(n_radial))
@@ -152,9 +153,7 @@ def polar_panels(u, n_radial: int, n_angular: int, dtype=None, rows=None,
         t_out, w_t_out = t, w_t
     else:
         t_out, w_t_out = (jnp.asarray(a, dtype) for a in gauss_legendre(n_outer, 0.0, 1.0))
-    frac, w_frac = gauss_legendre(n_angular, 0.0, 1.0)
-    if rows is not None:
-        frac, w_frac = frac[rows[0]:rows[1]], w_frac[rows[0]:rows[1]]
+    frac, w_frac = gauss_legendre(n_angular, 0.0, 1.0) if angles is None else angles
     frac, w_frac = jnp.asarray(frac, dtype), jnp.asarray(w_frac, dtype)
     u = jnp.asarray(u, dtype)
     alpha = (math.pi / 4) * frac  # (n_a,)
