@@ -418,7 +418,7 @@ def sweep(
         ``result.metadata["memory"]["temp_bytes"] / batch_size`` reports (XLA's temporary
         buffers of the compiled sweep). For the singlet lens + ``jmse`` in float64 on CPU
         (``benchmarks/sweep_bench.py``) it is about 9 MB (value) and 10 MB (value and
-        gradient) with ``preset="fast"``, and 11 MB and 45 MB with ``"default"``; on an
+        gradient) with ``preset="fast"``, and 13 MB and 32 MB with ``"default"``; on an
         H100 under ``vmap``, 4.4 and 6.7 MB (fast) and 7.4 and 93 MB (default).
     chunks_per_call : int >= 1
         Chunks of ``batch_size`` designs each device works through (``lax.map``) per call
