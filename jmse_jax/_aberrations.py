@@ -55,6 +55,16 @@ class AbstractAberrations(eqx.Module):
         """
         return self.chord_degree
 
+    def radially_symmetric(self, field):
+        """Whether ``W`` less its tilt depends on ``rho`` only at this ``field``.
+
+        Returns a Python bool when the answer does not depend on the coefficient values, else
+        a traced boolean scalar. Then ``|H(nu)|`` depends on ``|nu|`` only, and ``jmse`` can
+        integrate along one ray (``jmse_jax._radial``). The default, ``False``, is always safe.
+        """
+        del field
+        return False
+
     def without_tilt(self) -> AbstractAberrations:
         """The same wavefront less its best-fit tilt (its projection on ``x`` and ``y``).
 
@@ -106,6 +116,13 @@ class Seidel(AbstractAberrations):
     @property
     def x_symmetric(self) -> bool:
         return True
+
+    def radially_symmetric(self, field):
+        # Coma and astigmatism are the only non-radial terms besides the tilts (w311, w111);
+        # on the axis (field 0) both vanish. The products are the ones W is built from, so
+        # the answer matches the evaluated wavefront even when h**2 underflows.
+        h = jnp.asarray(field)
+        return (self.w131 * h == 0) & (self.w222 * (h * h) == 0)
 
     def without_tilt(self) -> Seidel:
         # Least-squares tilt of the y-odd terms: rho^2 y projects onto y with factor 2/3
@@ -241,6 +258,13 @@ class Zernike(AbstractAberrations):
         if max(n for n, _ in orders) == 4 and all(m == 0 for n, m in orders if n == 4):
             return 2
         return self.chord_degree
+
+    def radially_symmetric(self, field):
+        del field
+        angular = [i for i, j in enumerate(self.noll) if j not in (2, 3) and noll_to_nm(j)[1] != 0]
+        if not angular:
+            return True
+        return jnp.all(self.coefficients[np.asarray(angular)] == 0)
 
     def without_tilt(self) -> Zernike:
         # Z2 and Z3 are exactly the tilt (the basis is orthogonal over the pupil).

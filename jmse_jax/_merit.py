@@ -34,6 +34,7 @@ from ._quadrature import (
     polar_panels,
     radial_panel_sizes,
 )
+from ._radial import radial_band_integral
 from ._spectra import AbstractNoise, AbstractSignal, error_spectral_density
 
 __all__ = [
@@ -93,25 +94,29 @@ DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes")
+#: Preset entries that are not ``jmse`` keywords.
+_PRESET_ONLY = ("tiers", "radial")
 
 #: Named accuracy/speed settings of ``jmse``. ``nodes`` are OTF nodes per polar triangle
 #: (radial, angular), ``se_nodes`` the finer nodes on which the OTF is interpolated and
 #: ``S_e`` integrated, ``overlap_nodes`` the per-frequency autocorrelation rule.
 #: ``tiers`` (``"default"`` only) adapts the grid to the aberration strength; the fixed grid
 #: listed with it is the second tier's (that of the paper's Fig. 1 point), used when a grid
-#: option is overridden.
+#: option is overridden. ``radial``: a rotationally symmetric design (any design on the axis)
+#: with isotropic spectra is integrated along one ray (``jmse_jax._radial``) with the same
+#: counts along the ray; overriding a grid option turns it off too.
 PRESETS: dict[str, dict] = {
     "fast": dict(
         quadrature="polar", nodes=(24, 16), se_nodes=(400, 240), otf_method="overlap",
-        overlap_nodes=(28, 28), tiers=None,
+        overlap_nodes=(28, 28), tiers=None, radial=True,
     ),
     "default": dict(
         quadrature="polar", nodes=(40, 20), se_nodes=(2400, 160), otf_method="overlap",
-        overlap_nodes=(28, 28), tiers=DEFAULT_TIERS,
+        overlap_nodes=(28, 28), tiers=DEFAULT_TIERS, radial=True,
     ),
     "high": dict(
         quadrature="polar", nodes=(64, 40), se_nodes=(1600, 960), otf_method="overlap",
-        overlap_nodes=(48, 48), tiers=None,
+        overlap_nodes=(48, 48), tiers=None, radial=True,
     ),
 }
 
@@ -122,13 +127,14 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
     options = dict(PRESETS[preset])
     options.setdefault("B", 64)
     for key, value in overrides.items():
-        if key not in options or key == "tiers":
-            allowed = ", ".join(sorted(k for k in options if k != "tiers"))
+        if key not in options or key in _PRESET_ONLY:
+            allowed = ", ".join(sorted(k for k in options if k not in _PRESET_ONLY))
             raise ValueError(f"unknown jmse option {key!r}; options are: {allowed}")
         if value is not None:
             options[key] = value
             if key in _GRID_OPTIONS:
                 options["tiers"] = None
+                options["radial"] = False
     check_choice("quadrature", options["quadrature"], QUADRATURES)
     check_choice("otf_method", options["otf_method"], OTF_METHODS)
     check_count("B", options["B"])
@@ -460,6 +466,9 @@ def _tier_index(strength, u, tiers):
 
 
 def _merit_value(options, dtype, aberrations, field, u, signal, noise):
+    if options.get("_radial"):  # a plan for rotationally symmetric designs (see jmse)
+        total = radial_band_integral(aberrations, field, u, signal, noise, options, dtype)
+        return total / (2.0 * math.pi)
     total = _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror=False)
     if not aberrations.x_symmetric:
         mirrored = _band_integral(aberrations, field, u, signal, noise, options, dtype, True)
@@ -505,6 +514,32 @@ def _tier_plans(options, tiers):
             full["_remat_otf"] = True
         plans.append((full, short))
     return tuple(plans)
+
+
+def _radial_applies(options, signal, noise) -> bool:
+    """Whether the one-ray integral (``jmse_jax._radial``) can stand in for the polar grid of
+    ``options``: the polar rule with the overlap engine and a fine S_e grid, and spectra
+    that depend on ``|nu|`` only."""
+    return (options["quadrature"] == "polar" and options["otf_method"] == "overlap"
+            and options["se_nodes"] is not None and signal.isotropic and noise.isotropic)
+
+
+def _radial_plans(plans):
+    """The one-ray plans standing in for ``plans`` on rotationally symmetric designs, and the
+    first plan index of the second group.
+
+    The plans are split in two halves, each served by its last (finest) plan's grid counts
+    along the ray: one-ray plans cost a few ms at most, and each one adds about 5 % to the
+    compile time of the default's gradient, so two cover its four tiers (the weak ones with
+    the second tier's counts, the strong ones with the fourth's).
+    """
+    split = -(-len(plans) // 2)
+    groups = (plans[:split], plans[split:]) if len(plans) > 1 else (plans,)
+    radial = tuple(
+        ({**{k: v for k, v in group[-1][0].items() if k != "_remat_otf"}, "_radial": True},
+         None)
+        for group in groups)
+    return radial, split
 
 
 def _accepts(trial, check, rtol):
@@ -770,15 +805,30 @@ def jmse(
     aberrations = aberrations.without_tilt()
     operands = (aberrations, field, u, signal, noise)
     tiers = options.pop("tiers")
+    radial = options.pop("radial") and _radial_applies(options, signal, noise)
     if tiers is None:
-        value = _merit_value(options, dtype, *operands)
+        plans, index = ((options, None),), jnp.zeros((), jnp.int32)
     else:
         plans = _tier_plans(options, tiers)
         index = _tier_index(_strength(aberrations, field, u), jax.lax.stop_gradient(u), tiers)
-        if finite is None:  # concrete: run (and compile) the selected tier only
-            value = _eager_tier_value(plans[int(index)], dtype, operands)
+    # A rotationally symmetric design (any design on the axis) is integrated along one ray:
+    # more plans in the same switch (``_radial_plans``).
+    symmetric = aberrations.radially_symmetric(field) if radial else False
+    if symmetric is not False:
+        radial_plans, split = _radial_plans(plans)
+        group = (index >= split).astype(jnp.int32) if len(radial_plans) > 1 else 0
+        if symmetric is True:
+            plans, index = radial_plans, group + jnp.zeros((), jnp.int32)
         else:
-            value = _switched_merit(_Static((plans, dtype)), index, operands)
+            symmetric = jax.lax.stop_gradient(symmetric)
+            index = jnp.where(symmetric, len(plans) + group, index)
+            plans = plans + radial_plans
+    if len(plans) == 1 and plans[0][1] is None:
+        value = _merit_value(plans[0][0], dtype, *operands)
+    elif finite is None:  # concrete: run (and compile) the selected plan only
+        value = _eager_tier_value(plans[int(index)], dtype, operands)
+    else:
+        value = _switched_merit(_Static((plans, dtype)), index, operands)
     if finite is not None:
         value = jnp.where(finite, value, jnp.inf)
     return value

@@ -38,6 +38,12 @@ class AbstractSignal(eqx.Module):
         """``S_x`` at ``(nu_x, nu_y)``."""
         return self.radial(safe_norm(nu_x, nu_y))
 
+    @property
+    def isotropic(self) -> bool:
+        """True when ``S_x(nu) = radial(|nu|)`` (a subclass that overrides ``__call__`` is
+        not assumed to be)."""
+        return type(self).__call__ is AbstractSignal.__call__
+
 
 class MarkovSignal(AbstractSignal):
     """Exponentially correlated (first-order Markov) random field.
@@ -107,6 +113,11 @@ class AbstractNoise(eqx.Module):
     def __call__(self, nu_x, nu_y):
         """``S_n`` at ``(nu_x, nu_y)``."""
 
+    @property
+    def isotropic(self) -> bool:
+        """True when ``S_n`` depends on ``|nu|`` only (False unless a subclass says so)."""
+        return False
+
 
 class WhiteNoise(AbstractNoise):
     """White detector noise ``S_n = variance``.
@@ -123,6 +134,10 @@ class WhiteNoise(AbstractNoise):
 
     def __call__(self, nu_x, nu_y):
         return jnp.zeros_like(nu_x * nu_y) + self.variance
+
+    @property
+    def isotropic(self) -> bool:
+        return True
 
 
 def error_spectral_density(otf, signal_psd, noise_psd):

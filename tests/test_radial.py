@@ -1,0 +1,209 @@
+"""The one-ray integral for rotationally symmetric designs (``jmse_jax._radial``).
+
+Oracles: SciPy's Cartesian double integral of the aberration-free lens (independent of any
+polar geometry), the polar grid of ``_merit`` (a different integrator over the same band),
+finite differences, and the symmetry of the JMSE in the field height.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import oracles
+import pytest
+from compiled import jmse_fn
+
+import jmse_jax as jj
+from jmse_jax import _merit
+from jmse_jax._merit import _radial_plans, _tier_index
+
+SIGNAL, NOISE = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+SYMMETRIC = jj.Seidel(w020=-2.0, w040=1.2, w220=0.7)  # rotationally symmetric at any field
+
+
+def _planar(ab, field, u, signal=SIGNAL, noise=NOISE, **grid):
+    """The polar-grid value of the given grid (a grid override turns the one-ray path off)."""
+    grid = grid or dict(nodes=(64, 40), se_nodes=(1600, 960), overlap_nodes=(48, 48))
+    return float(jmse_fn(**grid)(ab, field, u, signal, noise))
+
+
+def _one_ray(ab, field, u, signal=SIGNAL, noise=NOISE, **grid):
+    """``_merit_value`` of the one-ray plan of ``grid`` (the tier-1 grid by default)."""
+    grid = grid or jj.DEFAULT_TIERS[1][2]
+    options = {**jj.jmse_options("default", **grid), "_radial": True}
+    dtype = jnp.float64
+    return float(_merit._merit_value(options, dtype, ab.without_tilt(), jnp.float64(field),
+                                     jnp.float64(u), signal, noise))
+
+
+def test_symmetry_predicate():
+    coma = jj.Seidel(w020=1.0, w131=0.5)
+    astigmatism = jj.Seidel(w020=1.0, w222=0.5)
+    assert bool(coma.radially_symmetric(0.0)) and not bool(coma.radially_symmetric(0.3))
+    assert bool(astigmatism.radially_symmetric(0.0))
+    assert not bool(astigmatism.radially_symmetric(1.0))
+    assert bool(jj.Seidel(w020=1.0, w220=2.0, w311=1.0, w111=3.0).radially_symmetric(0.9))
+    # Zernike: static when no angular term is listed (tilts do not count), else traced.
+    assert jj.Zernike([0.1, 0.2, 0.3, 0.4], noll=(2, 3, 4, 11)).radially_symmetric(0.0) is True
+    mixed = jj.Zernike([0.5, 0.0, 0.2], noll=(4, 5, 11))
+    assert bool(mixed.radially_symmetric(0.0))
+    assert not bool(jj.Zernike([0.5, 0.1, 0.2], noll=(4, 5, 11)).radially_symmetric(0.0))
+    assert jj.Seidel.__mro__[1].radially_symmetric(coma, 0.0) is False  # the safe default
+
+
+@pytest.mark.parametrize("u", [0.3, 0.85, 1.2])
+def test_aberration_free_lens_equals_cartesian_oracle(u):
+    """Every piece of the ray: [0, u] and the corners before the cutoff (0.3), the cutoff
+    inside the corners (0.85), the whole disc inside the band (1.2)."""
+    def s_e(x, y):
+        r = np.hypot(x, y)
+        return oracles.error_spectral_density(oracles.diffraction_limited_otf(r),
+                                              oracles.markov_psd(r, 1.0, 5.0), 1e-3)
+
+    if u < 1:
+        expected = oracles.square_integral(s_e, u, tol=1e-13) / (2 * math.pi)
+    else:  # split at the cutoff circle, where S_e has a kink
+        from scipy import integrate
+        inside, _ = integrate.quad(lambda r: (s_e(r, 0.0) - oracles.markov_psd(r, 1.0, 5.0)) * r,
+                                   0, 1, epsabs=1e-15, epsrel=1e-13, limit=200)
+        outside = oracles.square_integral(
+            lambda x, y: oracles.markov_psd(np.hypot(x, y), 1.0, 5.0), u, tol=1e-13)
+        expected = (2 * math.pi * inside + outside) / (2 * math.pi)
+    assert _one_ray(jj.Seidel(), 0.0, u) == pytest.approx(expected, rel=1e-10)
+    # jmse takes this path for the aberration-free lens.
+    assert float(jmse_fn()(jj.Seidel(), 0.0, u, SIGNAL, NOISE)) == pytest.approx(expected,
+                                                                                 rel=1e-10)
+
+
+@pytest.mark.parametrize("ab, field", [
+    (SYMMETRIC, 0.6),
+    (jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198), 0.0),
+    (jj.Zernike([0.3, -0.1, 0.05], noll=(4, 11, 22)), 0.0),
+])
+@pytest.mark.parametrize("u", [0.2, 0.6, 1.3])
+def test_one_ray_equals_polar_grid(ab, field, u):
+    """Two integrators of the same band: the default (its one-ray plan) and the high
+    preset's polar grid agree to 1e-9 on designs of a few waves. (Not for 0.71 < u < 1: there
+    the polar grid's rays reach the cutoff at some angles only, a kink in the angle that its
+    Gauss rule resolves slowly, 2e-5 at u = 0.9 on the first design; the aberration-free
+    oracle above covers the one-ray geometry there.)"""
+    assert bool(ab.without_tilt().radially_symmetric(field))
+    value = float(jmse_fn()(ab, field, u, SIGNAL, NOISE))
+    assert value == pytest.approx(_planar(ab, field, u), rel=1e-9)
+
+
+def test_power_law_signal_and_noise_level():
+    signal = jj.PowerLawSignal(1e-3, 2.0, 0.01)
+    noise = jj.WhiteNoise(1e-4)
+    expected = _planar(SYMMETRIC, 0.3, 0.4, signal, noise)
+    assert _one_ray(SYMMETRIC, 0.3, 0.4, signal, noise) == pytest.approx(expected, rel=1e-9)
+
+
+def test_default_dispatch_runs_the_one_ray_plan_of_its_group():
+    """Eager and jit give the one-ray plan of the group of the design's tier; the same design
+    a hair off the axis (a non-symmetric one) runs the polar grid and agrees to 1e-7."""
+    ab = jj.Seidel(w020=-6.0, w040=1.0, w131=0.8)
+    u = 0.2
+    strength = float(jj.aberration_strength(ab, 0.0, u))
+    plans = _merit._tier_plans(jj.jmse_options("default"), jj.DEFAULT_TIERS)
+    radial, split = _radial_plans(plans)
+    group = int(int(_tier_index(strength, u, jj.DEFAULT_TIERS)) >= split)
+    grid = {k: radial[group][0][k] for k in ("nodes", "se_nodes", "overlap_nodes")}
+    expected = _one_ray(ab, 0.0, u, **grid)
+    assert float(jj.jmse(ab, 0.0, u, SIGNAL, NOISE)) == pytest.approx(expected, rel=1e-13)
+    assert float(jmse_fn()(ab, 0.0, u, SIGNAL, NOISE)) == pytest.approx(expected, rel=1e-13)
+    off_axis = float(jmse_fn()(ab, 1e-5, u, SIGNAL, NOISE))
+    assert off_axis == pytest.approx(expected, rel=1e-7)
+    assert off_axis != expected  # a different integrator ran
+
+
+class _TiltedNoise(jj.WhiteNoise):
+    """White noise that does not declare itself isotropic (as a user's noise model would not)."""
+
+    @property
+    def isotropic(self):
+        return False
+
+
+def test_anisotropic_spectra_or_a_grid_override_keep_the_polar_grid(monkeypatch):
+    expected = float(jj.jmse(SYMMETRIC, 0.0, 0.2, SIGNAL, NOISE))  # the one-ray plan
+    value = float(jj.jmse(SYMMETRIC, 0.0, 0.2, SIGNAL, _TiltedNoise(1e-3)))
+    monkeypatch.setitem(jj.PRESETS["default"], "radial", False)
+    assert value == float(jj.jmse(SYMMETRIC, 0.0, 0.2, SIGNAL, NOISE))  # the polar grid ran
+    assert value == pytest.approx(expected, rel=1e-7) and value != expected
+    assert jj.jmse_options("default", nodes=(16, 8))["radial"] is False
+    with pytest.raises(ValueError, match="unknown jmse option 'radial'"):
+        jj.jmse_options("default", radial=False)
+
+
+def _coefficients(ab):
+    return {k: getattr(ab, k) for k in ("w020", "w040", "w131", "w222", "w220", "w311", "w111")}
+
+
+@jax.jit
+def _value_and_grad(ab, field, u, variance, mu):
+    def merit(ab, field, u, variance, mu):
+        return jj.jmse(ab, field, u, jj.MarkovSignal(1.0, mu), jj.WhiteNoise(variance))
+    return jax.value_and_grad(merit, argnums=(0, 1, 2, 3, 4))(ab, field, u, variance, mu)
+
+
+@pytest.mark.parametrize("u", [0.3, 0.85, 1.2])
+def test_gradients_on_the_axis(u):
+    """Central differences in w020, w040, u, the noise and the correlation length (every
+    evaluation on the axis runs the one-ray plan), and the exact zeros: the JMSE is even in
+    the field height, and coma and astigmatism are multiplied by it."""
+    ab = jj.Seidel(w020=-1.5, w040=0.8, w131=0.6, w222=-0.4)
+    args = dict(field=0.0, u=u, variance=1e-3, mu=5.0)
+    value, (grad, d_field, d_u, d_noise, d_mu) = _value_and_grad(ab, *args.values())
+
+    def f(ab=ab, **change):
+        return float(_value_and_grad(ab, *{**args, **change}.values())[0])
+
+    def central(fn, x, h):
+        return (fn(x + h) - fn(x - h)) / (2 * h)
+
+    for name in ("w020", "w040"):
+        def along(x, name=name):
+            return f(jj.Seidel(**{**_coefficients(ab), name: x}))
+        expected = central(along, float(getattr(ab, name)), 1e-5)
+        assert float(getattr(grad, name)) == pytest.approx(expected, rel=1e-6)
+    assert float(d_u) == pytest.approx(central(lambda x: f(u=x), u, 1e-6), rel=1e-6)
+    assert float(d_noise) == pytest.approx(central(lambda x: f(variance=x), 1e-3, 1e-8),
+                                           rel=1e-6)
+    assert float(d_mu) == pytest.approx(central(lambda x: f(mu=x), 5.0, 1e-5), rel=1e-6)
+    scale = abs(float(grad.w020))
+    for zero in (d_field, grad.w131, grad.w222, grad.w311, grad.w111):
+        assert abs(float(zero)) <= 1e-12 * scale
+    assert np.isfinite(float(value))
+
+
+def test_vmap_mixes_symmetric_and_other_designs():
+    """Under vmap (value_and_grad) each design gets what it gets alone, in a batch with
+    designs on the axis (one-ray plans of both groups) and off it (polar grids)."""
+    designs = [
+        (jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198), 0.95),
+        (jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198), 0.0),
+        (jj.Seidel(w020=8.0, w040=-4.0), 0.0),  # strength 22.6 at u = 0.5: the second group
+        (jj.Seidel(w020=0.2), 0.0),
+    ]
+    u = 0.5
+    batch = jax.tree_util.tree_map(lambda *x: jnp.stack([jnp.asarray(v, jnp.float64) for v in x]),
+                                   *[jj.Seidel(**_coefficients(d[0])) for d in designs])
+    field = jnp.asarray([d[1] for d in designs])
+
+    def merit(a, f):
+        return jj.jmse(a, f, u, SIGNAL, NOISE)
+
+    values, (grads, field_grads) = jax.jit(jax.vmap(jax.value_and_grad(merit, argnums=(0, 1))))(
+        batch, field)
+    single = jax.jit(jax.value_and_grad(merit, argnums=(0, 1)))
+    for i, (ab, f) in enumerate(designs):
+        value, (grad, field_grad) = single(jj.Seidel(**_coefficients(ab)), jnp.float64(f))
+        np.testing.assert_allclose(values[i], float(value), rtol=1e-13)
+        np.testing.assert_allclose(field_grads[i], field_grad, rtol=1e-10, atol=1e-14)
+        for name in ("w020", "w040", "w131", "w222", "w220"):
+            np.testing.assert_allclose(getattr(grads, name)[i], getattr(grad, name),
+                                       rtol=1e-10, atol=1e-14)
