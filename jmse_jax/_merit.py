@@ -28,6 +28,7 @@ from ._numerics import (
 )
 from ._otf import OTF_METHODS, _otf_fft, _otf_nudft, _otf_overlap, otf_fft_grid
 from ._quadrature import (
+    OUTER_NODES,
     QUADRATURES,
     frequency_quadrature,
     polar_interpolation_matrices,
@@ -238,11 +239,6 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
 #: Fine S_e nodes per block of angular rows (see ``_fine_blocks``).
 _FINE_BLOCK_POINTS = 1 << 16
 
-#: Radial nodes per fine angular row on the part of the ray beyond the cutoff. There
-#: ``S_e = S_x``, smooth and free of the OTF's ridges, so a short Gauss rule is exact to
-#: rounding (the inner rule's thousands of nodes would only cost time).
-_OUTER_NODES = 48
-
 
 def _fine_blocks(n_r, n_a):
     """``(n_blocks, size)``: equal blocks of angular rows of the fine S_e grid, each under
@@ -277,7 +273,7 @@ def _fine_parts(h, l_a, u, signal, noise, n_r, n_a, angles, dtype, adjoint):
     of complex ones), and the adjoint comes back in the same layout. These products contract
     over at most a few dozen rows, so their summation order is fixed.
     """
-    fine = polar_panels(u, n_r, n_a, dtype, n_outer=_OUTER_NODES, angles=angles)
+    fine = polar_panels(u, n_r, n_a, dtype, n_outer=OUTER_NODES, angles=angles)
     h = jnp.matmul(l_a, h, precision=EXACT)
     h_re, h_im = h[..., :n_r], h[..., n_r:]
     s_x = _signal_at(signal, fine, outer=False)

@@ -65,6 +65,12 @@ def _axis_rule(rule: str, p: int):
     return x, w
 
 
+#: Radial nodes on a ray's part beyond the cutoff (``polar_panels(n_outer=...)`` in the merit,
+#: and the one-ray integral's pieces there). There ``S_e = S_x``, smooth and free of the
+#: OTF's ridges, so a short Gauss rule is exact to rounding (the inner rule's thousands of
+#: nodes would only cost time).
+OUTER_NODES = 48
+
 #: Radial panel edges of the polar rule in ``t = r / R`` and the share of nodes in each.
 _RADIAL_EDGES = (0.0, 0.15, 0.4, 1.0)
 _RADIAL_SHARES = (0.3, 0.3, 0.4)

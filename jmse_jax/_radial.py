@@ -15,16 +15,17 @@ The ray is cut at the two points where the integrand is not smooth: ``r = u`` (`
 a square-root corner there) and the cutoff ``r = 1`` (beyond it ``H = 0`` and ``S_e = S_x``).
 The pieces, for any ``u``:
 
-- ``A``: ``r in [0, min(u, 1)]``, ``Theta = 2 pi``, ``S_e`` from the OTF, on the composite
-  radial panels of the polar rule (``_quadrature._radial_rule``) scaled to the piece;
+- ``A``: ``r in [0, min(u, 1)]``, ``Theta = 2 pi``, ``S_e`` from the OTF, on the radial
+  panels of the polar rule (``_quadrature._RADIAL_EDGES``) scaled to the piece;
 - ``B``: ``r in [u, min(sqrt(2) u, 1)]`` (empty when ``u >= 1``), ``S_e`` from the OTF, with
   ``r = u + L v**2`` so that the corner at ``r = u`` becomes smooth in ``v``;
 - ``C``: beyond the cutoff, ``S_x`` alone: ``r in [1, u]`` (``u > 1``) and
   ``r in [max(u, 1), sqrt(2) u]`` (again with ``r = lo + L v**2``).
 
 Empty pieces have zero length, hence zero weights, so one static program serves every ``u``.
-The OTF is evaluated on coarse nodes of ``A`` and ``B`` by the overlap engine (along
-``nu_x``) and interpolated polynomially to fine nodes, as the polar rule does along its rays.
+The OTF is evaluated on coarse Gauss nodes of ``A`` and ``B`` (per panel, as along the polar
+rule's rays) by the overlap engine (along ``nu_x``) and interpolated polynomially, panel by
+panel, to fine nodes on evenly spread sub-panels (``_fine_rule``).
 """
 
 from __future__ import annotations
@@ -37,13 +38,9 @@ import numpy as np
 
 from ._numerics import EXACT, barycentric_matrix, gauss_legendre, safe_arccos
 from ._otf import _otf_overlap
-from ._quadrature import _RADIAL_EDGES, _radial_counts
+from ._quadrature import _RADIAL_EDGES, OUTER_NODES, _radial_counts
 
 __all__ = ["radial_band_integral", "radial_counts"]
-
-#: Gauss nodes on each piece beyond the cutoff (``S_x`` alone: smooth).
-_OUTER_NODES = 48
-
 
 #: Largest Gauss order of the fine rule's sub-panels (see ``_fine_rule``).
 _SUB_PANEL = 48
@@ -62,7 +59,7 @@ def radial_counts(nodes: tuple[int, int], se_nodes: tuple[int, int]):
     for a few hundred microseconds.
     """
     n_r, n_fine = int(nodes[0]), int(se_nodes[0])
-    return -(-3 * n_r // 2), n_r, 2 * n_fine, max(_OUTER_NODES, n_fine)
+    return -(-3 * n_r // 2), n_r, 2 * n_fine, max(OUTER_NODES, n_fine)
 
 
 def _fine_rule(edges, coarse_counts, fine_counts):
@@ -151,7 +148,7 @@ def radial_band_integral(aberrations, field, u, signal, noise, options, dtype):
     total = jnp.sum(w_a * s_e(h_a, r_a)) + jnp.sum(w_b * s_e(h_b, r_b))
 
     # Beyond the cutoff: S_e = S_x.
-    x, w_x = (jnp.asarray(c, dtype) for c in gauss_legendre(_OUTER_NODES, 0.0, 1.0))
+    x, w_x = (jnp.asarray(c, dtype) for c in gauss_legendre(OUTER_NODES, 0.0, 1.0))
     length_c1 = jnp.maximum(u - one, 0.0)  # r in [1, u]: the whole circle is in the band
     r_c1 = one + length_c1 * x
     total = total + jnp.sum(two_pi * length_c1 * w_x * r_c1 * signal.radial(r_c1))
