@@ -22,6 +22,10 @@ The pieces, for any ``u``:
 - ``C``: beyond the cutoff, ``S_x`` alone: ``r in [1, u]`` (``u > 1``) and
   ``r in [max(u, 1), sqrt(2) u]`` (again with ``r = lo + L v**2``).
 
+Where a piece ends at the cutoff, ``H`` behaves like ``(1 - r)**(3/2)``. A map that makes
+``sqrt(1 - r)`` smooth there helped only the aberration-free lens (1e-10 -> 1e-15 at 24
+nodes) and cost aberrated ones more (defocus -5 at ``u = 1``: 1e-8 -> 8e-7 at 40 nodes, the
+ripples near the panel's start losing nodes), so the pieces are not mapped.
 Empty pieces have zero length, hence zero weights, so one static program serves every ``u``.
 The OTF is evaluated on coarse Gauss nodes of ``A`` and ``B`` (per panel, as along the polar
 rule's rays) by the overlap engine (along ``nu_x``) and interpolated polynomially, panel by
@@ -46,27 +50,42 @@ __all__ = ["radial_band_integral", "radial_counts"]
 _SUB_PANEL = 48
 
 
+#: Floors of the counts along the ray (``radial_counts``): coarse OTF nodes on ``A`` and
+#: ``B``, fine S_e nodes on ``A`` and ``B``.
+_MIN_COUNTS = (60, 40, 12800, 3200)
+
+
 def radial_counts(nodes: tuple[int, int], se_nodes: tuple[int, int]):
     """``(coarse A, coarse B, fine A, fine B)`` node counts along the ray for a polar grid.
 
-    The coarse counts are 1.5 times the grid's radial count on ``A`` (the OTF's ripples set
-    the accuracy there: 40 nodes leave 8e-7 on 6 waves of defocus, 60 leave 3e-13) and the
-    grid's count on ``B``. The fine counts are twice
-    the grid's radial S_e count on ``A`` and once on ``B`` (a third of ``A``'s length or
-    less): the polar grid integrates each ray with its own node positions, so its rays'
-    errors partly cancel, which one ray cannot; twice the count restores the accuracy (on
-    the bank's symmetric cases 2400 nodes along one ray leave up to 3e-8, 4800 leave 1e-13),
-    for a few hundred microseconds.
+    The coarse counts are 1.5 times the grid's radial count on ``A`` and the grid's count on
+    ``B``, and the fine counts twice the grid's radial S_e count on ``A`` and once on ``B``
+    (a third of ``A``'s length or less), each with a floor (``_MIN_COUNTS``). One ray costs
+    little, so the floors are set by accuracy alone, and they make the one-ray result at
+    least as accurate as the polar grid it stands in for, for every preset:
+
+    - coarse: the OTF's ripples set the accuracy on ``A``. On 6 waves of defocus at
+      ``u = 0.2``, 36 nodes (the fast grid's 1.5 x 24) leave 1.3e-5, 48 leave 2.7e-9 and
+      60 leave 3e-13;
+    - fine: ``S_e`` has narrow ridges along the OTF's zeros, the narrower the higher the
+      SNR and the stronger the aberration. With noise 1e-4 and 6 waves of defocus at
+      ``u = 0.2``, 3200 nodes on ``A`` leave 1.4e-4, 4800 leave 8e-7, 6400 leave 1e-9 and
+      9600 leave 8e-11; on a design of strength 23 at ``u = 0.84`` (noise 1.5e-3), 6400
+      leave 5.8e-5, 12800 leave 2.2e-7 and 25600 leave 3e-9. The polar grids of the
+      presets are 1e-3 to 1e-2 off on such designs: the polar grid integrates each ray at
+      its own node positions, so its rays' errors partly cancel, but it cannot afford
+      thousands of nodes per ray.
     """
     n_r, n_fine = int(nodes[0]), int(se_nodes[0])
-    return -(-3 * n_r // 2), n_r, 2 * n_fine, max(OUTER_NODES, n_fine)
+    wanted = (-(-3 * n_r // 2), n_r, 2 * n_fine, max(OUTER_NODES, n_fine))
+    return tuple(max(n, floor) for n, floor in zip(wanted, _MIN_COUNTS, strict=True))
 
 
 def _fine_rule(edges, coarse_counts, fine_counts):
     """Host rules on ``[edges[0], edges[-1]]``: the coarse composite Gauss rule (``counts``
     per panel), a fine one whose panels split each coarse panel into equal sub-panels of at
-    most ``_SUB_PANEL`` Gauss nodes, and the block interpolation matrix from coarse to fine
-    nodes (polynomial on each coarse panel).
+    most ``_SUB_PANEL`` Gauss nodes, and per coarse panel the interpolation matrix from its
+    coarse nodes to its fine ones (polynomial on the panel).
 
     Sub-panels keep the fine nodes evenly spread (one Gauss rule of thousands of nodes
     crowds them at the panel ends, and costs seconds to build).
@@ -83,12 +102,17 @@ def _fine_rule(edges, coarse_counts, fine_counts):
         fine.append(x_f)
         weights.append(np.concatenate([w for _, w in rules]))
         blocks.append(barycentric_matrix(x_c, x_f))
-    matrix = np.zeros((sum(len(x) for x in fine), sum(len(x) for x in coarse)))
-    r0 = c0 = 0
+    return np.concatenate(coarse), np.concatenate(fine), np.concatenate(weights), tuple(blocks)
+
+
+def _interpolate(blocks, h, dtype):
+    """The coarse values ``h`` (panels' nodes in order) at the fine nodes, panel by panel."""
+    parts, start = [], 0
     for block in blocks:
-        matrix[r0:r0 + block.shape[0], c0:c0 + block.shape[1]] = block
-        r0, c0 = r0 + block.shape[0], c0 + block.shape[1]
-    return np.concatenate(coarse), np.concatenate(fine), np.concatenate(weights), matrix
+        stop = start + block.shape[1]
+        parts.append(jnp.matmul(jnp.asarray(block, dtype), h[start:stop], precision=EXACT))
+        start = stop
+    return jnp.concatenate(parts)
 
 
 @functools.cache
@@ -132,8 +156,8 @@ def radial_band_integral(aberrations, field, u, signal, noise, options, dtype):
     # overlap rule is symmetric, so Im(H) is rounding. Real products interpolate it to the
     # fine nodes (half the work of complex ones).
     h = jnp.real(h)
-    h_a = jnp.matmul(jnp.asarray(interp_a, dtype), h[:n_a], precision=EXACT)
-    h_b = jnp.matmul(jnp.asarray(interp_b, dtype), h[n_a:], precision=EXACT)
+    h_a = _interpolate(interp_a, h[:n_a], dtype)
+    h_b = _interpolate(interp_b, h[n_a:], dtype)
     t_f, w_t, v_f, w_v = (jnp.asarray(x, dtype) for x in (t_f, w_t, v_f, w_v))
     r_a = a * t_f
     w_a = (two_pi * a) * w_t * r_a

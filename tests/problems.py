@@ -10,18 +10,23 @@ noise 1e-4. The eight ``hypercube_*`` cases are a fixed-seed uniform draw
 does not depend on the NumPy version.
 
 The reference values are computed by ``tests/make_references.py`` (run it; it prints the
-``REFERENCES`` block below) with ``preset="high"`` and with the stricter setting
-``STRICT_OPTIONS``; ``strict`` is the reference, ``abs(high - strict) / strict`` its
-convergence estimate. Cases whose estimate exceeds ``CONVERGED_RTOL`` are kept listed but
-excluded from accuracy checks (see ``Problem.converged``).
+``REFERENCES`` and ``RAY_REFERENCES`` blocks below). Every case is evaluated on the polar grid
+of ``preset="high"`` and with the stricter setting ``STRICT_OPTIONS``; ``strict`` is the polar
+reference, ``abs(high - strict) / strict`` its convergence estimate. The seven rotationally
+symmetric cases (on the axis, or with ``w020``, ``w040`` and ``w220`` only) are also
+integrated along one ray (``jmse_jax._radial``) at two settings that differ in every count,
+``RAY_STRICT_OPTIONS`` and ``RAY_FINE_OPTIONS``; the fine one-ray value is their reference.
+The two methods agree on all seven within the polar grid's own estimate (``test_merit``).
+Cases whose estimate exceeds ``CONVERGED_RTOL`` are kept listed but excluded from accuracy
+checks (see ``Problem.converged``).
 
-Convergence (run of 2026-11-22, STRICT_OPTIONS below): 25 of 29 cases converge to <= 1e-6
-(most to 1e-13; ``defocus_m6`` 8.9e-7, ``hypercube_0`` 7.9e-7). NOT converged, kept listed
-and excluded from the 1e-4 check: ``defocus_6_noise_1e-4`` (3.9e-5) and ``astigmatism_m6``
-(3.3e-5) -- both limited by ``se_nodes`` (S_e ridges along the OTF zeros at high SNR; the
-change from ``high``'s (1600, 960) to (3200, 1920) is what moves them) -- and the wide-band
-cases ``wide_u1_noise_1e-4`` (1.6e-5) and ``wide_u1_strong`` (8.6e-6), where ``high`` is the
-unconverged one: ``FINE_REFERENCES`` holds checked values for those two.
+Convergence (run of 2026-11-23): 26 of 29 cases converge to <= 1e-6 (most to 1e-13;
+``all_5_field_0.8`` 7.2e-7, ``hypercube_0`` 3.1e-8; the one-ray references to 3e-13 or
+better). NOT converged, kept listed and excluded from the 1e-4 check: ``astigmatism_m6``
+(2.7e-5), limited by ``se_nodes`` (S_e ridges along the OTF zeros at high SNR), and the
+wide-band cases ``wide_u1_noise_1e-4`` (1.6e-5) and ``wide_u1_strong`` (8.6e-6), where
+``high`` is the unconverged one: ``FINE_REFERENCES`` holds checked values for those two.
+(``defocus_6_noise_1e-4`` has the same polar limit, 1.9e-5, but a one-ray reference.)
 """
 
 from __future__ import annotations
@@ -32,6 +37,12 @@ import jmse_jax as jj
 
 #: The stricter setting of the reference computation (``preset="high"`` is the other).
 STRICT_OPTIONS = dict(nodes=(96, 56), se_nodes=(3200, 1920), overlap_nodes=(96, 96))
+
+#: One-ray settings (``jmse_jax._radial``: the band integral along one ray, for a wavefront
+#: that depends on ``rho`` only) of the references of the rotationally symmetric cases. They
+#: differ in every count; their values agree to a few 1e-13 or better (``RAY_REFERENCES``).
+RAY_STRICT_OPTIONS = dict(nodes=(96, 56), se_nodes=(6400, 1920), overlap_nodes=(96, 96))
+RAY_FINE_OPTIONS = dict(nodes=(160, 56), se_nodes=(12800, 1920), overlap_nodes=(128, 128))
 
 #: A reference counts as converged when ``abs(high - strict) / strict`` is at most this.
 CONVERGED_RTOL = 1e-6
@@ -69,12 +80,28 @@ class Problem:
 
     @property
     def reference(self) -> float:
-        """The strict-setting reference JMSE."""
-        return REFERENCES[self.name][1]
+        """The reference JMSE: the fine one-ray value for rotationally symmetric cases
+        (``RAY_REFERENCES``), otherwise the polar strict-setting value."""
+        if self.name in RAY_REFERENCES:
+            return RAY_REFERENCES[self.name][1]
+        return self.polar_reference
 
     @property
     def convergence(self) -> float:
-        """``abs(high - strict) / strict``, the reference's error estimate."""
+        """The reference's error estimate: the relative difference of its two settings."""
+        if self.name in RAY_REFERENCES:
+            strict, fine = RAY_REFERENCES[self.name]
+            return abs(strict - fine) / fine
+        return self.polar_convergence
+
+    @property
+    def polar_reference(self) -> float:
+        """The polar grid's strict-setting value (every case)."""
+        return REFERENCES[self.name][1]
+
+    @property
+    def polar_convergence(self) -> float:
+        """``abs(high - strict) / strict`` of the polar grid."""
         high, strict = REFERENCES[self.name]
         return abs(high - strict) / strict
 
@@ -134,38 +161,38 @@ BANK = PROBLEMS
 PROBLEMS_BY_NAME = {p.name: p for p in PROBLEMS}
 
 # REFERENCES-BEGIN
-# Computed by tests/make_references.py on 2026-11-22 (jax 0.10.2, float64, CPU).
-# name: (preset='high', STRICT_OPTIONS); comment: abs(high - strict) / strict
+# Computed by tests/make_references.py on 2026-11-23 (jax 0.10.2, float64, CPU).
+# name: (the high preset's polar grid, STRICT_OPTIONS); comment: abs(high - strict) / strict
 REFERENCES: dict[str, tuple[float, float]] = {
-    'fig1': (0.002653943236638171, 0.002653943236638888),  # 2.7e-13
-    'fig1_defocus_m6': (0.0035719197871258023, 0.003571919787125593),  # 5.9e-14
-    'fig1_small_u': (9.842216105724366e-05, 9.842216105728563e-05),  # 4.3e-13
-    'fig1_noise_1e-4': (0.00044244689037930044, 0.00044244689037957805),  # 6.3e-13
-    'fig1_noise_1e-2': (0.008950651960516719, 0.00895065196051641),  # 3.4e-14
-    'fig1_u_0.5': (0.01251285461137736, 0.012512854611374784),  # 2.1e-13
-    'fig1_defocus_m6_u_0.1_noise_1e-4': (9.133152095600626e-05, 9.133152095599221e-05),  # 1.5e-13
-    'diffraction_limited': (4.0013027583081345e-05, 4.001302758308421e-05),  # 7.2e-14
-    'defocus_0.5': (0.0006238609462711676, 0.0006238609462714396),  # 4.4e-13
-    'defocus_m6': (0.03039084282194372, 0.030390869771898275),  # 8.9e-07
-    'defocus_6_noise_1e-4': (0.015205954203792098, 0.01520655348098709),  # 3.9e-05  NOT CONVERGED
-    'spherical_6_balanced': (0.012584890513703552, 0.012584890513703869),  # 2.5e-14
-    'coma_6': (0.0035390148237390015, 0.0035390148237392136),  # 6.0e-14
-    'astigmatism_m6': (0.026655685743652503, 0.026656566146524795),  # 3.3e-05  NOT CONVERGED
-    'field_curvature_6_u_0.1': (0.012940692913665043, 0.01294069511008912),  # 1.7e-07
-    'all_5_field_0.8': (0.06767989662878607, 0.06767987565722426),  # 3.1e-07
-    'powerlaw_fig1': (0.0004939944464474837, 0.0004939944464474553),  # 5.8e-14
-    'powerlaw_defocus_m3_u_0.4': (0.0014114937722320329, 0.0014114937722319982),  # 2.5e-14
-    'hypercube_0': (0.03881799273659817, 0.038817962065802715),  # 7.9e-07
-    'hypercube_1': (0.000646428184599137, 0.0006464281845993191),  # 2.8e-13
-    'hypercube_2': (0.015615803335032867, 0.015615803335028051),  # 3.1e-13
-    'hypercube_3': (0.04833892274931453, 0.04833892358539756),  # 1.7e-08
-    'hypercube_4': (0.0033654697053946045, 0.0033654697053944827),  # 3.6e-14
-    'hypercube_5': (0.04146030814663813, 0.04146030814663087),  # 1.8e-13
-    'hypercube_6': (0.0019376438112952137, 0.0019376438112952022),  # 5.9e-15
-    'hypercube_7': (0.005368575394169297, 0.005368575394169766),  # 8.7e-14
-    'wide_u1_noise_1e-4': (0.020975465357859567, 0.02097580937727954),  # 1.6e-05  NOT CONVERGED
-    'wide_u1_strong': (0.012762717611281095, 0.01276260809726923),  # 8.6e-06  NOT CONVERGED
-    'wide_u0.7_field_1': (0.017739685484585956, 0.01773968548253064),  # 1.2e-10
+    'fig1': (0.0026539432366384365, 0.002653943236638479),  # 1.6e-14
+    'fig1_defocus_m6': (0.0035719197871257762, 0.0035719197871256344),  # 4.0e-14
+    'fig1_small_u': (9.84221610572597e-05, 9.842216105726437e-05),  # 4.7e-14
+    'fig1_noise_1e-4': (0.0004424468903793989, 0.0004424468903794496),  # 1.1e-13
+    'fig1_noise_1e-2': (0.008950651960516658, 0.008950651960516207),  # 5.0e-14
+    'fig1_u_0.5': (0.01251285461137641, 0.012512854611376448),  # 3.0e-15
+    'fig1_defocus_m6_u_0.1_noise_1e-4': (9.133152095071075e-05, 9.133152095598634e-05),  # 5.8e-11
+    'diffraction_limited': (4.00130275830826e-05, 4.001302758308242e-05),  # 4.4e-15
+    'defocus_0.5': (0.0006238609462712674, 0.0006238609462713063),  # 6.2e-14
+    'defocus_m6': (0.03039087195991739, 0.030390869833270204),  # 7.0e-08
+    'defocus_6_noise_1e-4': (0.015206950074224176, 0.015206663665474246),  # 1.9e-05  NOT CONVERGED
+    'spherical_6_balanced': (0.01258489051370311, 0.012584890513705784),  # 2.1e-13
+    'coma_6': (0.0035390148237390956, 0.0035390148237390085),  # 2.5e-14
+    'astigmatism_m6': (0.026655837526797628, 0.02665655716426009),  # 2.7e-05  NOT CONVERGED
+    'field_curvature_6_u_0.1': (0.012940697140331369, 0.012940695110392472),  # 1.6e-07
+    'all_5_field_0.8': (0.06767982710565544, 0.06767987565186173),  # 7.2e-07
+    'powerlaw_fig1': (0.0004939944464474761, 0.000493994446447455),  # 4.3e-14
+    'powerlaw_defocus_m3_u_0.4': (0.0014114937722321367, 0.001411493772232151),  # 1.0e-14
+    'hypercube_0': (0.03881796325060716, 0.03881796205552764),  # 3.1e-08
+    'hypercube_1': (0.000646428184599205, 0.0006464281845992216),  # 2.6e-14
+    'hypercube_2': (0.015615803338350397, 0.01561580333503021),  # 2.1e-10
+    'hypercube_3': (0.04833892364030884, 0.04833892358539163),  # 1.1e-09
+    'hypercube_4': (0.003365469705394602, 0.0033654697053943417),  # 7.7e-14
+    'hypercube_5': (0.041460307973126144, 0.04146030814663732),  # 4.2e-09
+    'hypercube_6': (0.0019376438112951974, 0.0019376438112951345),  # 3.2e-14
+    'hypercube_7': (0.005368575394169649, 0.005368575394169169),  # 8.9e-14
+    'wide_u1_noise_1e-4': (0.020975465357859567, 0.020975809377279532),  # 1.6e-05  NOT CONVERGED
+    'wide_u1_strong': (0.01276271761128109, 0.012762608097269233),  # 8.6e-06  NOT CONVERGED
+    'wide_u0.7_field_1': (0.017739685484585953, 0.017739685482530642),  # 1.2e-10
 }
 # REFERENCES-END
 
@@ -177,3 +204,17 @@ FINE_REFERENCES: dict[str, float] = {
     'wide_u1_noise_1e-4': 0.02097577325199456,
     'wide_u1_strong': 0.012762609426121934,
 }
+
+# RAY-REFERENCES-BEGIN
+# Computed by tests/make_references.py on 2026-11-23 (jax 0.10.2, float64, CPU).
+# name: (RAY_STRICT_OPTIONS, RAY_FINE_OPTIONS); comment: abs(strict - fine) / fine
+RAY_REFERENCES: dict[str, tuple[float, float]] = {
+    'diffraction_limited': (4.0013027583082856e-05, 4.001302758308283e-05),  # 6.8e-16
+    'defocus_0.5': (0.000623860946271294, 0.0006238609462712734),  # 3.3e-14
+    'defocus_m6': (0.030390869829826143, 0.030390869829826157),  # 4.6e-16
+    'defocus_6_noise_1e-4': (0.015206660320062204, 0.01520666032005967),  # 1.7e-13
+    'spherical_6_balanced': (0.012584890513705631, 0.012584890513701635),  # 3.2e-13
+    'field_curvature_6_u_0.1': (0.012940695110354495, 0.012940695110354889),  # 3.0e-14
+    'powerlaw_defocus_m3_u_0.4': (0.001411493772232145, 0.0014114937722321571),  # 8.6e-15
+}
+# RAY-REFERENCES-END

@@ -132,6 +132,21 @@ def test_bank_is_well_formed():
         assert all(abs(v) <= 6 for v in p.coefficients.values())
         assert 0 <= p.field <= 1 and 0.1 <= p.u <= 1.0 and 1e-4 <= p.noise_variance <= 1e-2
     assert FIG1_JMSE == pytest.approx(problems.PROBLEMS_BY_NAME["fig1"].reference, rel=1e-7)
+    # Every rotationally symmetric case (and only those) has a one-ray reference.
+    symmetric = {p.name for p in problems.PROBLEMS
+                 if bool(p.aberrations().radially_symmetric(p.field))
+                 and p.signal_model().isotropic and p.noise_model().isotropic}
+    assert set(problems.RAY_REFERENCES) == symmetric and len(symmetric) >= 5
+
+
+@pytest.mark.parametrize("name", sorted(problems.RAY_REFERENCES))
+def test_one_ray_references_agree_with_the_polar_grid(name):
+    """Two methods, one reference: the one-ray value (``jmse_jax._radial``) lies within the
+    polar grid's own convergence estimate of its strict value."""
+    problem = problems.PROBLEMS_BY_NAME[name]
+    assert problem.convergence <= 1e-12
+    bound = max(problem.polar_convergence, 1e-12)
+    assert problem.polar_reference == pytest.approx(problem.reference, rel=bound)
 
 
 def _relative_errors(options, cases):
@@ -139,8 +154,10 @@ def _relative_errors(options, cases):
     return np.array([abs(float(fn(*p.arguments())) - p.reference) / p.reference for p in cases])
 
 
-# Cases where all three presets have errors well above rounding (so the order is meaningful).
-ORDERING_CASES = ["defocus_m6", "field_curvature_6_u_0.1", "hypercube_0", "hypercube_3"]
+# Cases where all three presets have errors well above rounding (so the order is meaningful);
+# none rotationally symmetric, where every preset's one-ray plan is within ~1e-10.
+ORDERING_CASES = ["fig1_defocus_m6_u_0.1_noise_1e-4", "wide_u0.7_field_1", "hypercube_0",
+                  "hypercube_3"]
 
 
 def test_preset_ordering():

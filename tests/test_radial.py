@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import oracles
+import problems
 import pytest
 from compiled import assert_vmap_matches_singles, jmse_fn
 
@@ -93,6 +94,29 @@ def test_one_ray_equals_polar_grid(ab, field, u):
     assert bool(ab.without_tilt().radially_symmetric(field))
     value = float(jmse_fn()(ab, field, u, SIGNAL, NOISE))
     assert value == pytest.approx(_planar(ab, field, u), rel=1e-9)
+
+
+@pytest.mark.parametrize("preset", ["fast", "default", "high"])
+def test_every_preset_resolves_the_ridges_of_a_high_snr_design(preset):
+    """Noise 1e-4 and 6 waves of defocus: S_e has narrow ridges along the OTF's zeros. The
+    bank's reference (one ray at 8x the default's fine count, within 2.2e-7 of the polar
+    grid's strict value, whose own estimate is 1.9e-5). The fine count's floor (12800) keeps
+    every preset within 1e-9; before it, ``high`` (3200 nodes along the ray) was 1.4e-4 off."""
+    problem = problems.PROBLEMS_BY_NAME["defocus_6_noise_1e-4"]
+    value = float(jmse_fn(preset=preset)(*problem.arguments()))
+    assert value == pytest.approx(problem.reference, rel=1e-9)
+
+
+def test_strong_design_near_the_cutoff_against_a_finer_ray():
+    """Strength 23 at u = 0.84: the default's one-ray plan against one ray at every count
+    doubled or more (its error was 5.8e-5 with 6400 fine nodes; the polar grid of ``high``
+    is 7e-3 off here)."""
+    ab = jj.Seidel(w020=9.6, w040=0.75, w220=7.3)
+    args = (ab, 0.2, 0.84, SIGNAL, jj.WhiteNoise(1.5e-3))
+    fine = dict(nodes=(240, 56), se_nodes=(20000, 1920), overlap_nodes=(128, 128))
+    expected = _one_ray(*args[:3], noise=args[4], **fine)
+    value = float(jmse_fn()(*args))
+    assert value == pytest.approx(expected, rel=1e-6)
 
 
 def test_power_law_signal_and_noise_level():
