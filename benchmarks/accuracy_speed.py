@@ -218,8 +218,12 @@ def default_by_tier(cases) -> dict:
     """Warm time of the adaptive default's value and value_and_grad on every bank case,
     grouped by the tier its ``aberration_strength`` selects and, in a tier with a shortcut
     (``TierShortcut``), by whether the trial grid was kept (the headline times use Fig. 1
-    only, which lies in tier 1)."""
-    from jmse_jax._merit import _accepts, _tier_index
+    only, which lies in tier 1). Rotationally symmetric cases run one of the default's
+    one-ray plans instead (``jmse_jax._radial``), grouped by that plan."""
+    from jmse_jax._merit import _accepts, _radial_plans, _tier_index, _tier_plans
+    from jmse_jax._radial import radial_counts
+
+    _, split = _radial_plans(_tier_plans(jj.jmse_options(), jj.DEFAULT_TIERS))
 
     value_fn = _jmse()
     vag_fn = jax.value_and_grad(value_fn, argnums=0)
@@ -230,6 +234,17 @@ def default_by_tier(cases) -> dict:
         tier = int(_tier_index(strength, u, jj.DEFAULT_TIERS))
         _, _, grid, shortcut = jj.DEFAULT_TIERS[tier]
         group = str(tier)
+        signal, noise = case.arguments[3:]
+        if bool(ab.radially_symmetric(field)) and signal.isotropic and noise.isotropic:
+            last = split - 1 if tier < split else len(jj.DEFAULT_TIERS) - 1
+            first = 0 if tier < split else split
+            ray = jj.DEFAULT_TIERS[last][2]
+            group = f"one ray (tiers {first}-{last})"
+            counts = radial_counts(ray["nodes"], ray["se_nodes"])
+            grid = dict(description=(
+                f"radii {counts[0]} + {counts[1]} (OTF), {counts[2]} + {counts[3]} (S_e), "
+                f"overlap {tuple(ray['overlap_nodes'])}"))
+            shortcut = None
         if shortcut is not None:  # which grid the shortcut's rule returns
             trial, check = (float(jax.jit(_jmse(**g))(*case.arguments))
                             for g in (shortcut.trial, shortcut.check))
@@ -383,13 +398,16 @@ def markdown(report) -> str:
                   "tier 1 first tries tier 0's grid and keeps it when a coarse check grid "
                   "agrees (`TierShortcut`; a refused trial costs its own and the check's "
                   "time on top of the tier's grid). The headline times are those of Fig. 1 "
-                  "(tier 1). Every bank case:", "",
+                  "(tier 1). Rotationally symmetric cases run one of the two one-ray plans "
+                  "(`jmse_jax/_radial.py`; radii on [0, min(u, 1)] + [u, sqrt(2) u]). "
+                  "Every bank case:", "",
                   "| tier | grid | cases | value (median) | value_and_grad (median) |",
                   "|---|---|---|---|---|"]
         for tier, row in tiered["tiers"].items():
             grid = row["grid"]
-            lines.append(f"| {tier} | nodes {grid['nodes']}, se {grid['se_nodes']}, overlap "
-                         f"{grid['overlap_nodes']} | {row['cases']} "
+            text = grid.get("description") or (f"nodes {grid['nodes']}, se {grid['se_nodes']}, "
+                                               f"overlap {grid['overlap_nodes']}")
+            lines.append(f"| {tier} | {text} | {row['cases']} "
                          f"| {common.fmt_seconds(row['value_s_median'])} "
                          f"| {common.fmt_seconds(row['value_and_grad_s_median'])} |")
         lines += ["", f"Mean over the bank: value "

@@ -50,9 +50,8 @@ __all__ = ["radial_band_integral", "radial_counts"]
 _SUB_PANEL = 48
 
 
-#: Floors of the counts along the ray (``radial_counts``): coarse OTF nodes on ``A`` and
-#: ``B``, fine S_e nodes on ``A`` and ``B``.
-_MIN_COUNTS = (60, 40, 12800, 3200)
+#: Floors of the fine S_e counts along the ray on ``A`` and ``B`` (``radial_counts``).
+_MIN_FINE = (12800, 3200)
 
 
 def radial_counts(nodes: tuple[int, int], se_nodes: tuple[int, int]):
@@ -60,25 +59,24 @@ def radial_counts(nodes: tuple[int, int], se_nodes: tuple[int, int]):
 
     The coarse counts are 1.5 times the grid's radial count on ``A`` and the grid's count on
     ``B``, and the fine counts twice the grid's radial S_e count on ``A`` and once on ``B``
-    (a third of ``A``'s length or less), each with a floor (``_MIN_COUNTS``). One ray costs
-    little, so the floors are set by accuracy alone, and they make the one-ray result at
-    least as accurate as the polar grid it stands in for, for every preset:
+    (a third of ``A``'s length or less), at least ``_MIN_FINE``. With these the one-ray
+    result is at least as accurate as the polar grid it stands in for, for every preset:
 
     - coarse: the OTF's ripples set the accuracy on ``A``. On 6 waves of defocus at
-      ``u = 0.2``, 36 nodes (the fast grid's 1.5 x 24) leave 1.3e-5, 48 leave 2.7e-9 and
-      60 leave 3e-13;
-    - fine: ``S_e`` has narrow ridges along the OTF's zeros, the narrower the higher the
-      SNR and the stronger the aberration. With noise 1e-4 and 6 waves of defocus at
-      ``u = 0.2``, 3200 nodes on ``A`` leave 1.4e-4, 4800 leave 8e-7, 6400 leave 1e-9 and
-      9600 leave 8e-11; on a design of strength 23 at ``u = 0.84`` (noise 1.5e-3), 6400
-      leave 5.8e-5, 12800 leave 2.2e-7 and 25600 leave 3e-9. The polar grids of the
-      presets are 1e-3 to 1e-2 off on such designs: the polar grid integrates each ray at
-      its own node positions, so its rays' errors partly cancel, but it cannot afford
-      thousands of nodes per ray.
+      ``u = 0.2``, 36 nodes (the fast grid's 1.5 x 24) leave 1.3e-5 (the fast polar grid:
+      3.6e-4), 48 leave 2.7e-9 and 60 (the default's) 3e-13. A floor of 60 would cost the
+      fast preset 0.7 ms per design (1.0 -> 1.7 ms), its polar grid's accuracy unneeded;
+    - fine: ``S_e`` has narrow ridges along the OTF's zeros, the narrower the higher the SNR and the
+      stronger the aberration (the floor costs the fast preset 0.35 ms). With noise 1e-4 and 6 waves
+      of defocus at ``u = 0.2``, 3200 nodes on ``A`` leave 1.4e-4, 4800 leave 8e-7, 6400 leave 1e-9
+      and 9600 leave 8e-11; on a design of strength 23 at ``u = 0.84`` (noise 1.5e-3), 6400 leave
+      5.8e-5, 12800 leave 2.2e-7 and 25600 leave 3e-9. The polar grids of the presets are 1e-3 to
+      1e-2 off on such designs: the polar grid integrates each ray at its own node positions, so its
+      rays' errors partly cancel, but it cannot afford thousands of nodes per ray.
     """
     n_r, n_fine = int(nodes[0]), int(se_nodes[0])
-    wanted = (-(-3 * n_r // 2), n_r, 2 * n_fine, max(OUTER_NODES, n_fine))
-    return tuple(max(n, floor) for n, floor in zip(wanted, _MIN_COUNTS, strict=True))
+    return (-(-3 * n_r // 2), n_r, max(2 * n_fine, _MIN_FINE[0]),
+            max(OUTER_NODES, n_fine, _MIN_FINE[1]))
 
 
 def _fine_rule(edges, coarse_counts, fine_counts):
@@ -118,7 +116,7 @@ def _interpolate(blocks, h, dtype):
 @functools.cache
 def _ray_rules(n_a: int, n_b: int, m_a: int, m_b: int):
     """Host rules of pieces ``A`` (in ``t = r / min(u, 1)``, on the polar rule's radial
-    panels) and ``B`` (in ``v``, one panel): ``(coarse, fine, fine weights, interpolation)``
+    panels) and ``B`` (in ``v``, one panel): ``(coarse, fine, fine weights, interpolation blocks)``
     for each."""
     piece_a = _fine_rule(_RADIAL_EDGES, _radial_counts(n_a), _radial_counts(m_a))
     piece_b = _fine_rule((0.0, 1.0), (n_b,), (m_b,))

@@ -96,15 +96,16 @@ def test_one_ray_equals_polar_grid(ab, field, u):
     assert value == pytest.approx(_planar(ab, field, u), rel=1e-9)
 
 
-@pytest.mark.parametrize("preset", ["fast", "default", "high"])
-def test_every_preset_resolves_the_ridges_of_a_high_snr_design(preset):
+@pytest.mark.parametrize("preset, rtol", [("fast", 1e-4), ("default", 1e-9), ("high", 1e-9)])
+def test_every_preset_resolves_the_ridges_of_a_high_snr_design(preset, rtol):
     """Noise 1e-4 and 6 waves of defocus: S_e has narrow ridges along the OTF's zeros. The
-    bank's reference (one ray at 8x the default's fine count, within 2.2e-7 of the polar
+    bank's reference (one ray at 4x the default's fine count, within 2.2e-7 of the polar
     grid's strict value, whose own estimate is 1.9e-5). The fine count's floor (12800) keeps
-    every preset within 1e-9; before it, ``high`` (3200 nodes along the ray) was 1.4e-4 off."""
+    the default and ``high`` within 1e-9 (before it, ``high``'s 3200 nodes along the ray were
+    1.4e-4 off) and the fast preset within its coarse OTF's 1.3e-5 (its polar grid: 1.8e-3)."""
     problem = problems.PROBLEMS_BY_NAME["defocus_6_noise_1e-4"]
     value = float(jmse_fn(preset=preset)(*problem.arguments()))
-    assert value == pytest.approx(problem.reference, rel=1e-9)
+    assert value == pytest.approx(problem.reference, rel=rtol)
 
 
 def test_strong_design_near_the_cutoff_against_a_finer_ray():
