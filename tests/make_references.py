@@ -60,6 +60,22 @@ def _symmetric(problem) -> bool:
     return bool(ab.radially_symmetric(field)) and signal.isotropic and noise.isotropic
 
 
+def _block(begin, end, name, legend, rows) -> str:
+    """The text of one reference block: ``rows`` maps a case to ``(a, b, rel)``."""
+    lines = [
+        begin,
+        f"# Computed by tests/make_references.py on {datetime.date.today().isoformat()} "
+        f"(jax {jax.__version__}, float64, CPU).",
+        f"# name: {legend}",
+        f"{name}: dict[str, tuple[float, float]] = {{",
+    ]
+    for case, (first, second, rel) in rows.items():
+        flag = "" if rel <= problems.CONVERGED_RTOL else "  NOT CONVERGED"
+        lines.append(f"    {case!r}: ({first!r}, {second!r}),  # {rel:.1e}{flag}")
+    lines += ["}", end]
+    return "\n".join(lines)
+
+
 def _replace_block(text, begin, end, block):
     head, rest = text.split(begin, 1)
     _, tail = rest.split(end, 1)
@@ -103,32 +119,13 @@ def main(argv=None) -> None:
                   f"rel {ray_rel:.1e}; polar strict off by "
                   f"{abs(values['strict'] - ray['fine']) / ray['fine']:.1e}", flush=True)
 
-    lines = [
-        BEGIN,
-        f"# Computed by tests/make_references.py on {datetime.date.today().isoformat()} "
-        f"(jax {jax.__version__}, float64, CPU).",
-        "# name: (the high preset's polar grid, STRICT_OPTIONS); "
-        "comment: abs(high - strict) / strict",
-        "REFERENCES: dict[str, tuple[float, float]] = {",
-    ]
-    for name, (high, strict, rel) in rows.items():
-        flag = "" if rel <= problems.CONVERGED_RTOL else "  NOT CONVERGED"
-        lines.append(f"    {name!r}: ({high!r}, {strict!r}),  # {rel:.1e}{flag}")
-    lines += ["}", END]
-    block = "\n".join(lines)
+    block = _block(BEGIN, END, "REFERENCES",
+                   "(the high preset's polar grid, STRICT_OPTIONS); "
+                   "comment: abs(high - strict) / strict", rows)
     print(block)
-    lines = [
-        RAY_BEGIN,
-        f"# Computed by tests/make_references.py on {datetime.date.today().isoformat()} "
-        f"(jax {jax.__version__}, float64, CPU).",
-        "# name: (RAY_STRICT_OPTIONS, RAY_FINE_OPTIONS); comment: abs(strict - fine) / fine",
-        "RAY_REFERENCES: dict[str, tuple[float, float]] = {",
-    ]
-    for name, (strict, fine, rel) in ray_rows.items():
-        flag = "" if rel <= problems.CONVERGED_RTOL else "  NOT CONVERGED"
-        lines.append(f"    {name!r}: ({strict!r}, {fine!r}),  # {rel:.1e}{flag}")
-    lines += ["}", RAY_END]
-    ray_block = "\n".join(lines)
+    ray_block = _block(RAY_BEGIN, RAY_END, "RAY_REFERENCES",
+                       "(RAY_STRICT_OPTIONS, RAY_FINE_OPTIONS); comment: abs(strict - fine) / fine",
+                       ray_rows)
     print(ray_block)
     if args.write:
         if args.only:
