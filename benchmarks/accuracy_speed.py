@@ -224,6 +224,7 @@ def default_by_tier(cases) -> dict:
     from jmse_jax._radial import radial_counts
 
     _, split = _radial_plans(_tier_plans(jj.jmse_options(), jj.DEFAULT_TIERS))
+    one_ray = common._import_problems().runs_one_ray
 
     value_fn = _jmse()
     vag_fn = jax.value_and_grad(value_fn, argnums=0)
@@ -234,8 +235,7 @@ def default_by_tier(cases) -> dict:
         tier = int(_tier_index(strength, u, jj.DEFAULT_TIERS))
         _, _, grid, shortcut = jj.DEFAULT_TIERS[tier]
         group = str(tier)
-        signal, noise = case.arguments[3:]
-        if bool(ab.radially_symmetric(field)) and signal.isotropic and noise.isotropic:
+        if one_ray(case.arguments):
             last = split - 1 if tier < split else len(jj.DEFAULT_TIERS) - 1
             first = 0 if tier < split else split
             ray = jj.DEFAULT_TIERS[last][2]

@@ -65,7 +65,7 @@ def radial_counts(nodes: tuple[int, int], se_nodes: tuple[int, int]):
     - coarse: the OTF's ripples set the accuracy on ``A``. On 6 waves of defocus at
       ``u = 0.2``, 36 nodes (the fast grid's 1.5 x 24) leave 1.3e-5 (the fast polar grid:
       3.6e-4), 48 leave 2.7e-9 and 60 (the default's) 3e-13. A floor of 60 would cost the
-      fast preset 0.7 ms per design (1.0 -> 1.7 ms), its polar grid's accuracy unneeded;
+      fast preset 0.7 ms per design (1.0 -> 1.7 ms) for accuracy its polar grid lacks;
     - fine: ``S_e`` has narrow ridges along the OTF's zeros, the narrower the higher the SNR and the
       stronger the aberration (the floor costs the fast preset 0.35 ms). With noise 1e-4 and 6 waves
       of defocus at ``u = 0.2``, 3200 nodes on ``A`` leave 1.4e-4, 4800 leave 8e-7, 6400 leave 1e-9

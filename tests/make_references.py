@@ -55,11 +55,6 @@ def _ray(options):
     return jax.jit(value)
 
 
-def _symmetric(problem) -> bool:
-    ab, field, _, signal, noise = problem.arguments()
-    return bool(ab.radially_symmetric(field)) and signal.isotropic and noise.isotropic
-
-
 def _block(begin, end, name, legend, rows) -> str:
     """The text of one reference block: ``rows`` maps a case to ``(a, b, rel)``."""
     lines = [
@@ -111,7 +106,7 @@ def main(argv=None) -> None:
         print(f"{problem.name:36s} high {values['high']:.16e} strict {values['strict']:.16e} "
               f"rel {rel:.1e} ({time.perf_counter() - start:.1f} s){extra}", flush=True)
         rows[problem.name] = (values["high"], values["strict"], rel)
-        if _symmetric(problem):
+        if problems.runs_one_ray(problem.arguments()):
             ray = {key: float(fn(*problem.arguments())) for key, fn in rays.items()}
             ray_rel = abs(ray["strict"] - ray["fine"]) / ray["fine"]
             ray_rows[problem.name] = (ray["strict"], ray["fine"], ray_rel)

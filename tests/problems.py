@@ -110,6 +110,14 @@ class Problem:
         return self.convergence <= CONVERGED_RTOL
 
 
+def runs_one_ray(arguments) -> bool:
+    """Whether ``jmse``'s presets integrate ``(aberrations, field, u, signal, noise)`` along
+    one ray: a rotationally symmetric wavefront and isotropic spectra."""
+    aberrations, field, _, signal, noise = arguments
+    return (bool(aberrations.radially_symmetric(field)) and signal.isotropic
+            and noise.isotropic)
+
+
 def _hypercube(name, c, field, u, noise):
     keys = ("w020", "w040", "w131", "w222", "w220")
     return Problem(name, dict(zip(keys, c, strict=True)), field, u, noise)

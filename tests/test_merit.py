@@ -133,9 +133,7 @@ def test_bank_is_well_formed():
         assert 0 <= p.field <= 1 and 0.1 <= p.u <= 1.0 and 1e-4 <= p.noise_variance <= 1e-2
     assert FIG1_JMSE == pytest.approx(problems.PROBLEMS_BY_NAME["fig1"].reference, rel=1e-7)
     # Every rotationally symmetric case (and only those) has a one-ray reference.
-    symmetric = {p.name for p in problems.PROBLEMS
-                 if bool(p.aberrations().radially_symmetric(p.field))
-                 and p.signal_model().isotropic and p.noise_model().isotropic}
+    symmetric = {p.name for p in problems.PROBLEMS if problems.runs_one_ray(p.arguments())}
     assert set(problems.RAY_REFERENCES) == symmetric and len(symmetric) >= 5
 
 
