@@ -3,16 +3,39 @@
 The library never turns on float64 itself (STYLE.md); the tests do, before any array exists.
 Compiled closures are module-level singletons so each distinct option set and input
 structure is compiled once per test session (compilation dominates the suite's runtime).
+
+Compilation is also shared *between* processes: the xdist workers, and the subprocesses the
+CLI, notebook and multi-host tests start, all use one JAX persistent compilation cache, a
+temporary folder made by the first process (it sets ``JAX_COMPILATION_CACHE_DIR``, which the
+others inherit) and removed at the end. A user's own ``JAX_COMPILATION_CACHE_DIR`` is used as
+it is and kept.
 """
 
 from __future__ import annotations
 
+import os
 import pathlib
+import shutil
 import sys
+import tempfile
 
-import jax
+if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="jmse_jax_test_jit_")
+    os.environ["JMSE_JAX_TEST_CACHE_OWNER"] = str(os.getpid())
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.3")
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+jax.config.update("jax_persistent_cache_min_compile_time_secs",
+                  float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]))
+
+
+def pytest_unconfigure(config):
+    """The process that made the shared cache folder removes it."""
+    if os.environ.get("JMSE_JAX_TEST_CACHE_OWNER") == str(os.getpid()):
+        shutil.rmtree(os.environ["JAX_COMPILATION_CACHE_DIR"], ignore_errors=True)
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
