@@ -23,17 +23,19 @@ from ._numerics import (
     check_finite_tree,
     check_range,
     common_dtype,
-    gauss_legendre,
     is_concrete,
 )
 from ._otf import OTF_METHODS, _otf_fft, _otf_nudft, _otf_overlap, otf_fft_grid
 from ._quadrature import (
     OUTER_NODES,
     QUADRATURES,
+    angular_rule,
+    angular_split,
     frequency_quadrature,
     polar_interpolation_matrices,
     polar_panels,
     radial_panel_sizes,
+    split_interpolation,
 )
 from ._radial import radial_band_integral
 from ._spectra import AbstractNoise, AbstractSignal, error_spectral_density
@@ -297,8 +299,13 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
     returns ``G = L_r^T (sum_blocks L_a^T g)``: the coarse-sized gradient of the total with
     respect to ``Re(H_coarse)`` + i ``Im(H_coarse)``.
     """
-    l_r, l_a = polar_interpolation_matrices(coarse, fine)
+    l_r, _ = polar_interpolation_matrices(coarse, fine)
     n_r, n_a = fine
+    # The angular rules may be split at arccos(u) (``angular_split``): the coarse rule's
+    # template row picks the fine rule's row and the block-diagonal interpolation matrix.
+    split = angular_split(u, coarse[1], dtype)
+    l_a = jnp.asarray(split_interpolation(coarse[1], n_a), dtype)[split[0]]
+    frac, w_frac = angular_rule(u, coarse[1], dtype, split=split, fine=n_a)
     # Separable interpolation, radial axis first (the cheaper order). The radial products
     # (which contract over up to n_r fine nodes in the adjoint) stay complex: as real
     # products XLA's threaded GEMM summed in an order that depended on the program and
@@ -312,11 +319,11 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
     # carry zero weight and zero interpolation rows, so they add exact zeros.
     n_blocks, size = _fine_blocks(n_r, n_a)
     pad = n_blocks * size - n_a
-    frac, w_frac = gauss_legendre(n_a, 0.0, 1.0)
     rows = (
-        np.concatenate([l_a, np.zeros((pad, l_a.shape[1]))]).reshape(n_blocks, size, -1),
-        np.concatenate([frac, np.full(pad, 0.5)]).reshape(n_blocks, size),
-        np.concatenate([w_frac, np.zeros(pad)]).reshape(n_blocks, size),
+        jnp.concatenate([l_a, jnp.zeros((pad, l_a.shape[1]), dtype)]).reshape(n_blocks, size,
+                                                                               -1),
+        jnp.concatenate([frac, jnp.full(pad, 0.5, dtype)]).reshape(n_blocks, size),
+        jnp.concatenate([w_frac, jnp.zeros(pad, dtype)]).reshape(n_blocks, size),
     )
 
     def block(carry, rows):

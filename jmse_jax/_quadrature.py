@@ -25,6 +25,7 @@ Rules (names used by ``jmse(quadrature=...)``; the first four are the paper's Fi
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -120,6 +121,91 @@ def _radial_interpolation(n_coarse: int, n_fine: int) -> np.ndarray:
     return matrix
 
 
+#: Fewest angular nodes on either side of a split angular rule (``angular_templates``).
+_MIN_SPLIT = 2
+
+
+def _split_row(n: int, n1: int):
+    """One row of a (split) angular rule: ``n1`` Gauss nodes on the first part, ``n - n1``
+    on the second (``n1 = n``: the plain rule)."""
+    x1, w1 = gauss_legendre(n1, 0.0, 1.0)
+    if n1 == n:
+        return x1, w1, np.zeros(n, bool)
+    x2, w2 = gauss_legendre(n - n1, 0.0, 1.0)
+    return np.concatenate([x1, x2]), np.concatenate([w1, w2]), np.arange(n) >= n1
+
+
+def _coarse_splits(n: int) -> list[int]:
+    """``n1`` of each template row: the plain rule, then ``_MIN_SPLIT .. n - _MIN_SPLIT``."""
+    return [n] + list(range(_MIN_SPLIT, n - _MIN_SPLIT + 1))
+
+
+@functools.cache
+def angular_templates(n: int, fine: int | None = None):
+    """Host templates ``(local, weights, second)``, each ``(rows, m)``, of the angular rule
+    of a polar triangle (cached): positions and weights on [0, 1] within their part and
+    whether a node lies in the second part. Row 0 is the plain Gauss rule; row ``k >= 1``
+    splits ``n`` nodes into ``n1 = _MIN_SPLIT + k - 1`` and ``n - n1``. With ``fine``, the
+    rows of the fine rule of ``fine`` nodes that match those of ``n`` (nodes shared in the
+    same proportion), ``m = fine``; otherwise ``m = n``.
+    """
+    m = n if fine is None else fine
+    rows = []
+    for k, n1 in enumerate(_coarse_splits(n)):
+        m1 = m if k == 0 else int(np.clip(round(n1 * m / n), _MIN_SPLIT, m - _MIN_SPLIT))
+        rows.append(_split_row(m, m1))
+    return tuple(np.stack(a) for a in zip(*rows, strict=True))
+
+
+def angular_split(u, n: int, dtype):
+    """``(row, f)``: the template row of ``angular_templates(n)`` for Nyquist ratio ``u`` and
+    the split point ``f`` (a fraction of the triangle's ``pi/4``; traced).
+
+    For ``1/sqrt(2) < u < 1`` a ray at angle ``alpha`` reaches the cutoff only for
+    ``alpha > arccos u``, and the angular integrand has a kink there; the rule is split at
+    ``f = arccos(u) / (pi/4)`` with nodes shared in proportion to the parts' lengths.
+    Otherwise the plain rule (row 0, ``f = 1``).
+    """
+    u = jnp.asarray(u, dtype)
+    inside = (u > math.sqrt(0.5)) & (u < 1.0)
+    u_safe = jnp.where(inside, u, 0.85)
+    f = jnp.where(inside, jnp.arccos(u_safe) / (math.pi / 4), 1.0)
+    if n < 2 * _MIN_SPLIT:
+        return jnp.zeros((), jnp.int32), jnp.ones((), dtype)
+    n1 = jnp.clip(jnp.round(jax.lax.stop_gradient(f) * n), _MIN_SPLIT, n - _MIN_SPLIT)
+    row = jnp.where(inside, (n1 - _MIN_SPLIT + 1).astype(jnp.int32), 0)
+    return row, f
+
+
+def angular_rule(u, n: int, dtype, split=None, fine: int | None = None):
+    """Angle fractions and weights of the (possibly split) angular rule of ``n`` nodes, or
+    of its matching ``fine`` rule (traced)."""
+    local, weights, second = angular_templates(n, fine)
+    row, f = angular_split(u, n, dtype) if split is None else split
+    local, weights, second = (jnp.asarray(a)[row] for a in (local, weights, second))
+    local, weights = local.astype(dtype), weights.astype(dtype)
+    frac = jnp.where(second, f + (1.0 - f) * local, f * local)
+    w_frac = jnp.where(second, (1.0 - f) * weights, f * weights)
+    return frac, w_frac
+
+
+@functools.cache
+def split_interpolation(coarse: int, fine: int) -> np.ndarray:
+    """Host matrices ``(rows, fine, coarse)`` from each template row of the coarse angular
+    rule to the matching fine row (block-diagonal in the two parts)."""
+    c_local, _, c_second = angular_templates(coarse)
+    f_local, _, f_second = angular_templates(coarse, fine)
+    out = np.zeros((len(c_local), fine, coarse))
+    for row in range(len(c_local)):
+        for part in (False, True):
+            ci = np.flatnonzero(c_second[row] == part)
+            fi = np.flatnonzero(f_second[row] == part)
+            if len(ci) and len(fi):
+                out[row][np.ix_(fi, ci)] = barycentric_matrix(c_local[row][ci],
+                                                              f_local[row][fi])
+    return out
+
+
 class PolarPanels(NamedTuple):
     """Nodes of the polar panel rule, shaped ``(2 triangles, n_angles, n_radial)``.
 
@@ -159,9 +245,9 @@ def polar_panels(u, n_radial: int, n_angular: int, dtype=None, n_outer: int | No
         t_out, w_t_out = t, w_t
     else:
         t_out, w_t_out = (jnp.asarray(a, dtype) for a in gauss_legendre(n_outer, 0.0, 1.0))
-    frac, w_frac = gauss_legendre(n_angular, 0.0, 1.0) if angles is None else angles
-    frac, w_frac = jnp.asarray(frac, dtype), jnp.asarray(w_frac, dtype)
     u = jnp.asarray(u, dtype)
+    frac, w_frac = angular_rule(u, n_angular, dtype) if angles is None else angles
+    frac, w_frac = jnp.asarray(frac, dtype), jnp.asarray(w_frac, dtype)
     alpha = (math.pi / 4) * frac  # (n_a,)
     w_alpha = (math.pi / 4) * w_frac
     r_max = u / jnp.cos(alpha)
