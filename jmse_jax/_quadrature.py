@@ -122,7 +122,7 @@ def _radial_interpolation(n_coarse: int, n_fine: int) -> np.ndarray:
 
 
 #: Fewest angular nodes on either side of a split angular rule (``angular_templates``).
-_MIN_SPLIT = 2
+_MIN_SPLIT = 4
 
 
 def _split_row(n: int, n1: int):

@@ -178,6 +178,32 @@ def test_preset_ordering_whole_bank():
     assert worst["fast"] >= worst["default"] >= worst["high"]
 
 
+WIDE_BAND_DESIGN = jj.Seidel(w020=1.2, w040=-0.8, w131=0.9, w222=-1.1, w220=0.6)
+
+
+@pytest.mark.parametrize("coefficients, field, u", [
+    ((-0.579, -0.02, 0.127, -0.942, 0.872), 0.613, 0.75),
+    ((-0.254, -0.016, 0.417, -1.035, 0.131), 0.916, 0.85),
+])
+def test_wide_band_kink_is_resolved(coefficients, field, u):
+    """1/sqrt(2) < u < 1: rays reach the cutoff at some angles only (a kink in the angular
+    integrand at arccos u). With the angular rule split there, the default and the high
+    preset agree to 1e-6; with one Gauss rule across the kink the default was 1.4e-4 and
+    4.7e-5 off on these two designs of benchmarks/wide_band_check.py (noise 1e-4)."""
+    ab = jj.Seidel(**dict(zip(("w020", "w040", "w131", "w222", "w220"), coefficients,
+                              strict=True)))
+    args = (ab, field, u, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4))
+    high = float(jmse_fn(preset="high")(*args))
+    assert float(jmse_fn()(*args)) == pytest.approx(high, rel=1e-6)
+
+
+@pytest.mark.parametrize("u", [math.sqrt(0.5), math.sqrt(0.5) + 1e-9, 1.0 - 1e-9, 1.0])
+def test_gradient_in_u_at_the_ends_of_the_split_range(u):
+    grad = jax.grad(lambda u: jj.jmse(WIDE_BAND_DESIGN, 0.8, u, jj.MarkovSignal(1.0, 5.0),
+                                      jj.WhiteNoise(1e-3), preset="fast"))
+    assert np.isfinite(float(grad(u)))
+
+
 def test_other_quadratures_and_engines_agree(fig1):
     reference = problems.PROBLEMS_BY_NAME["fig1"].reference
     gauss = float(jmse_fn(quadrature="gauss", nodes=32)(*fig1))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import oracles
 import pytest
@@ -111,11 +112,38 @@ def test_polar_past_the_cutoff(u):
     assert errors[1] < errors[0] / 10
 
 
-def test_weights_are_differentiable_in_u():
+@pytest.mark.parametrize("u", [0.3, 0.8])
+def test_weights_are_differentiable_in_u(u):
+    """At u = 0.8 the polar rule's angular rule is split at arccos(u), a traced point."""
     for rule in ("gauss", "polar"):
         p = (12, 12) if rule == "polar" else 5
         area = jax.grad(lambda u, rule=rule, p=p: frequency_quadrature(rule, u, p)[2].sum())
-        assert float(area(0.3)) == pytest.approx(8 * 0.3, rel=1e-12)
+        # The split point moves with u: its parts' rules are exact only to their order.
+        assert float(area(u)) == pytest.approx(8 * u, rel=1e-12 if u < 0.7 else 1e-9)
+
+
+@pytest.mark.parametrize("u", [0.6, 0.75, 0.95, 1.1])
+def test_split_angular_rule(u):
+    """For 1/sqrt(2) < u < 1 the angular rule is split at arccos(u), where the rays start
+    to reach the cutoff, with nodes shared in proportion; otherwise the plain Gauss rule."""
+    from jmse_jax._quadrature import angular_rule
+
+    frac, w_frac = (np.asarray(a) for a in angular_rule(u, 12, jnp.float64))
+    assert np.all(np.diff(frac) > 0) and frac[0] > 0 and frac[-1] < 1
+    assert w_frac.sum() == pytest.approx(1.0, rel=1e-14)
+    plain, _ = np.polynomial.legendre.leggauss(12)
+    if not math.sqrt(0.5) < u < 1:
+        np.testing.assert_allclose(frac, (plain + 1) / 2, rtol=1e-14)
+        return
+    split = math.acos(u) / (math.pi / 4)
+    n1 = int(np.sum(frac < split))
+    assert n1 == min(max(round(split * 12), 4), 8)
+    # Each part holds a Gauss rule of its own: it integrates x**(2 n - 1) exactly.
+    x1, x2 = frac[:n1], frac[n1:]
+    w1, w2 = w_frac[:n1], w_frac[n1:]
+    k = 2 * min(n1, 12 - n1) - 1
+    assert np.sum(w1 * x1**k) == pytest.approx(split ** (k + 1) / (k + 1), rel=1e-12)
+    assert np.sum(w2 * x2**k) == pytest.approx((1 - split ** (k + 1)) / (k + 1), rel=1e-12)
 
 
 @pytest.mark.parametrize(
