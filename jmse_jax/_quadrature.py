@@ -236,8 +236,12 @@ def polar_panels(u, n_radial: int, n_angular: int, dtype=None, n_outer: int | No
     ``_RADIAL_EDGES``), and the part beyond the cutoff ``[R, r_max]`` has its own nodes.
     ``n_outer`` sets a separate Gauss rule of that many nodes for the part beyond the cutoff
     (default: the inner rule), where the integrand is the smooth ``S_x`` alone.
-    ``angles = (frac, w_frac)`` replaces the ``n_angular`` Gauss rows by the given angle
-    fractions (of the triangle's ``pi/4``) and weights, e.g. one block of rows inside a loop.
+    The ``n_angular`` rays follow ``angular_rule``: one Gauss rule in the angle, split at
+    ``arccos u`` for ``1/sqrt(2) < u < 1`` (where the rays start to reach the cutoff, a kink
+    in the angular integrand that one Gauss rule resolves only algebraically: 1e-5 to 1e-4
+    at the presets' counts, ``benchmarks/wide_band_check.py``).
+    ``angles = (frac, w_frac)`` replaces them by the given angle fractions (of the triangle's
+    ``pi/4``) and weights, e.g. one block of rows inside a loop.
     """
     dtype = dtype or jnp.result_type(float)
     t, w_t = (jnp.asarray(a, dtype) for a in _radial_rule(n_radial))
