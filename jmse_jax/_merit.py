@@ -35,7 +35,6 @@ from ._quadrature import (
     polar_interpolation_matrices,
     polar_panels,
     radial_panel_sizes,
-    split_interpolation,
 )
 from ._radial import radial_band_integral
 from ._spectra import AbstractNoise, AbstractSignal, error_spectral_density
@@ -299,12 +298,12 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
     returns ``G = L_r^T (sum_blocks L_a^T g)``: the coarse-sized gradient of the total with
     respect to ``Re(H_coarse)`` + i ``Im(H_coarse)``.
     """
-    l_r, _ = polar_interpolation_matrices(coarse, fine)
+    l_r, l_a_rows = polar_interpolation_matrices(coarse, fine)
     n_r, n_a = fine
     # The angular rules may be split at arccos(u) (``angular_split``): the coarse rule's
     # template row picks the fine rule's row and the block-diagonal interpolation matrix.
     split = angular_split(u, coarse[1], dtype)
-    l_a = jnp.asarray(split_interpolation(coarse[1], n_a), dtype)[split[0]]
+    l_a = jnp.asarray(l_a_rows, dtype)[split[0]]
     frac, w_frac = angular_rule(u, coarse[1], dtype, split=split, fine=n_a)
     # Separable interpolation, radial axis first (the cheaper order). The radial products
     # (which contract over up to n_r fine nodes in the adjoint) stay complex: as real

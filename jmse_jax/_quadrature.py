@@ -166,12 +166,12 @@ def angular_split(u, n: int, dtype):
     ``f = arccos(u) / (pi/4)`` with nodes shared in proportion to the parts' lengths.
     Otherwise the plain rule (row 0, ``f = 1``).
     """
+    if n < 2 * _MIN_SPLIT:  # too few nodes for two parts: always the plain rule
+        return jnp.zeros((), jnp.int32), jnp.ones((), dtype)
     u = jnp.asarray(u, dtype)
     inside = (u > math.sqrt(0.5)) & (u < 1.0)
     u_safe = jnp.where(inside, u, 0.85)
     f = jnp.where(inside, jnp.arccos(u_safe) / (math.pi / 4), 1.0)
-    if n < 2 * _MIN_SPLIT:
-        return jnp.zeros((), jnp.int32), jnp.ones((), dtype)
     n1 = jnp.clip(jnp.round(jax.lax.stop_gradient(f) * n), _MIN_SPLIT, n - _MIN_SPLIT)
     row = jnp.where(inside, (n1 - _MIN_SPLIT + 1).astype(jnp.int32), 0)
     return row, f
@@ -273,10 +273,11 @@ def polar_panels(u, n_radial: int, n_angular: int, dtype=None, n_outer: int | No
 def polar_interpolation_matrices(coarse: tuple[int, int], fine: tuple[int, int]):
     """Host matrices ``(L_radial, L_angular)`` taking polar-panel values from ``coarse``
     ``(n_radial, n_angular)`` Gauss nodes to ``fine`` ones (polynomial interpolation in ``t``
-    and in the angle fraction, each on [0, 1])."""
-    a_c, _ = gauss_legendre(coarse[1], 0.0, 1.0)
-    a_f, _ = gauss_legendre(fine[1], 0.0, 1.0)
-    return _radial_interpolation(coarse[0], fine[0]), barycentric_matrix(a_c, a_f)
+    and in the angle fraction, each on [0, 1]). ``L_angular`` is ``(rows, fine, coarse)``, one
+    matrix per template row of the (split) angular rule (``split_interpolation``; row 0: the
+    plain Gauss rules)."""
+    return (_radial_interpolation(coarse[0], fine[0]),
+            split_interpolation(coarse[1], fine[1]))
 
 
 def frequency_quadrature(rule: str, u, p, dtype=None):
