@@ -14,9 +14,15 @@ returned.
 
     python benchmarks/calibrate_tiers.py                 # seeds 7, 11, 12 x 150 designs (~10 min)
     python benchmarks/calibrate_tiers.py --seeds 1 --designs 20   # a quick look
+    python benchmarks/calibrate_tiers.py --u 0.75 0.85 0.95 --current --name calibrate_tiers_kink
 
-Writes ``results/calibrate_tiers.json`` (every design, reference and error) and
-``results/calibrate_tiers.md`` (the summary).
+``--u`` replaces the values ``u`` is drawn from (the last line samples only the range
+``1/sqrt(2) < u < 1``, where the angular rule is split at ``arccos u``), ``--current`` limits
+the candidates to the default's present tiers and its shortcut's check grid, and ``--name``
+names the result files.
+
+Writes ``results/<name>.json`` (every design, reference and error) and ``results/<name>.md``
+(the summary); ``<name>`` is ``calibrate_tiers`` unless given.
 """
 
 from __future__ import annotations
@@ -51,13 +57,23 @@ CANDIDATES = {
     "shortcut check": dict(jj.DEFAULT_TIERS[1][3].check),
 }
 _STRONG = ("old_t2", "t2se = tier 3", "h2", "m = tier 2")
+#: The candidates that are the default's present grids (``--current``), and the default
+#: itself as a user gets it (its tier chosen by the design, its shortcut applied).
+CURRENT = ("old_t0 = tier 0", "a2 = tier 1", "m = tier 2", "t2se = tier 3", "shortcut check",
+           "default")
+#: Values ``u`` is drawn from (``--u`` replaces them).
+U_VALUES = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)
 
 STRENGTH_BINS = ((0, 1), (1, 3), (3, 5), (5, 7), (7, 10), (10, 15), (15, 25))
 U_BINS = ((0.0, 0.5), (0.5, 1.0))
+#: Bins for draws inside the split range of the angular rule (``--u`` above 1/sqrt(2)).
+KINK_U_BINS = ((0.7071, 0.8), (0.8, 0.9), (0.9, 1.0))
 
 
 def _applies(name: str, strength: float, u: float) -> bool:
     """Which candidates are evaluated on a design (the tier ranges they could serve)."""
+    if name == "default":
+        return True
     if name.startswith("old_t0"):  # also the middle tier's shortcut trial
         return strength <= 5
     if name == "shortcut check":
@@ -67,7 +83,8 @@ def _applies(name: str, strength: float, u: float) -> bool:
     return strength <= 8
 
 
-def calibrate(seed: int, designs: int, jitted: dict) -> list[dict]:
+def calibrate(seed: int, designs: int, jitted: dict, u_values=U_VALUES,
+              candidates=CANDIDATES) -> list[dict]:
     rng = np.random.default_rng(seed)
 
     def merit(options):
@@ -82,7 +99,7 @@ def calibrate(seed: int, designs: int, jitted: dict) -> list[dict]:
         coefficients = {k: float(rng.uniform(-scale, scale))
                         for k in ("w020", "w040", "w131", "w222", "w220")}
         field = float(rng.uniform(0, 1))
-        u = float(rng.choice([0.1, 0.2, 0.3, 0.5, 0.7, 1.0]))
+        u = float(rng.choice(list(u_values)))
         noise_variance = float(10 ** rng.uniform(-4, -2))
         ab = jj.Seidel(**coefficients)
         strength = float(jj.aberration_strength(ab, field, u))
@@ -96,7 +113,7 @@ def calibrate(seed: int, designs: int, jitted: dict) -> list[dict]:
         if strength > 5 or u > 0.5 or noise_variance < 3e-4:
             check = float(merit(CHECK)(*args))
             row["check_error"] = abs(check - reference) / reference
-        for name, options in CANDIDATES.items():
+        for name, options in candidates.items():
             if _applies(name, strength, u):
                 value = float(merit(options)(*args))
                 row["values"][name] = value
@@ -107,7 +124,7 @@ def calibrate(seed: int, designs: int, jitted: dict) -> list[dict]:
     return rows
 
 
-def summary(rows: list[dict]) -> str:
+def summary(rows: list[dict], candidates=CANDIDATES) -> str:
     checks = [r["check_error"] for r in rows if "check_error" in r]
     lines = [
         "# Calibration of the adaptive default's tiers",
@@ -122,10 +139,11 @@ def summary(rows: list[dict]) -> str:
         "the candidate was not evaluated there):",
         "",
     ]
-    names = list(CANDIDATES)
+    names = list(candidates)
+    u_bins = KINK_U_BINS if min(r["u"] for r in rows) > KINK_U_BINS[0][0] else U_BINS
     lines.append("| u | K | n | " + " | ".join(names) + " |")
     lines.append("|---" * (len(names) + 3) + "|")
-    for u_lo, u_hi in U_BINS:
+    for u_lo, u_hi in u_bins:
         for k_lo, k_hi in STRENGTH_BINS:
             chosen = [r for r in rows if u_lo < r["u"] <= u_hi and k_lo < r["strength"] <= k_hi]
             cells = []
@@ -135,7 +153,7 @@ def summary(rows: list[dict]) -> str:
             lines.append(f"| ({u_lo}, {u_hi}] | ({k_lo}, {k_hi}] | {len(chosen)} | "
                          + " | ".join(cells) + " |")
     lines += ["", "Grids:", ""]
-    lines += [f"- `{name}`: {options}" for name, options in CANDIDATES.items()]
+    lines += [f"- `{name}`: {options}" for name, options in candidates.items()]
     return "\n".join(lines + shortcut_summary(rows)) + "\n"
 
 
@@ -179,14 +197,25 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[7, 11, 12])
     parser.add_argument("--designs", type=int, default=150, help="designs drawn per seed")
+    parser.add_argument("--u", type=float, nargs="+", default=list(U_VALUES),
+                        help="values u is drawn from")
+    parser.add_argument("--current", action="store_true",
+                        help="only the default's present tiers and shortcut check")
+    parser.add_argument("--name", default="calibrate_tiers", help="name of the result files")
     args = parser.parse_args(argv)
+    for u in args.u:
+        if not 0 < u <= 1:
+            parser.error(f"--u values must lie in (0, 1], got {u}")
+    candidates = ({k: CANDIDATES.get(k, {}) for k in CURRENT} if args.current else CANDIDATES)
     jitted: dict = {}
-    rows = [row for seed in args.seeds for row in calibrate(seed, args.designs, jitted)]
+    rows = [row for seed in args.seeds
+            for row in calibrate(seed, args.designs, jitted, args.u, candidates)]
     report = dict(description=__doc__.splitlines()[0], machine=common.machine_info(),
-                  reference=REFERENCE, check=CHECK, candidates=CANDIDATES, designs=rows)
-    common.write_json(common.RESULTS / "calibrate_tiers.json", report)
-    text = summary(rows)
-    (common.RESULTS / "calibrate_tiers.md").write_text(text)
+                  reference=REFERENCE, check=CHECK, candidates=candidates, u_values=args.u,
+                  designs=rows)
+    common.write_json(common.RESULTS / f"{args.name}.json", report)
+    text = summary(rows, candidates)
+    (common.RESULTS / f"{args.name}.md").write_text(text)
     print(text)
     return 0
 

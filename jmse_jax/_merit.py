@@ -57,21 +57,31 @@ U_MAX = 1.5
 class TierShortcut(NamedTuple):
     """A cheaper grid a tier tries first: its value is kept when a coarse ``check`` agrees.
 
-    The tier computes the merit on ``trial`` and on ``check`` (both cheaper than the tier's
-    own grid); when ``|trial - check| <= rtol |trial|`` it returns the ``trial`` value,
-    otherwise it computes its own grid. The two grids differ in every node count, so their
-    errors are largely unrelated and their difference tracks the ``trial`` grid's error: on
-    the calibration designs near the threshold the error was at most 5.6 times the
-    difference, and a check closer to the trial failed together with it
-    (benchmarks/README.md, "Adaptive default").
+    For ``u <= u_max`` the tier computes the merit on ``trial`` and on ``check`` (both
+    cheaper than the tier's own grid); when ``|trial - check| <= rtol |trial|`` it returns
+    the ``trial`` value, otherwise it computes its own grid. The two grids differ in every
+    node count, so their errors are largely unrelated and their difference tracks the
+    ``trial`` grid's error: on the calibration designs near the threshold the error was at
+    most 5.6 times the difference, and a check closer to the trial failed together with it
+    (benchmarks/README.md, "Adaptive default"). Above ``u_max`` the tier goes straight to
+    its own grid.
     """
 
     trial: dict
     check: dict
     rtol: float
+    u_max: float = math.inf
 
 
 _TIER0_GRID = dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20))
+#: Above ``u = 1/sqrt(2)`` rays of the band reach the cutoff, where H has its
+#: ``(1 - r)^{3/2}`` edge, or end just short of it, and polynomial interpolation along the
+#: rays needs more radial OTF nodes. There the middle tier's shortcut is not tried (its
+#: trial and check grids missed the edge alike: at u = 0.85 both were 2.1e-4 off and agreed
+#: to 3e-6), and designs of strength 5-15 skip the third tier (56 radial nodes: 5.4e-4 off
+#: at u = 0.8; the fourth's 80: 2e-6). Calibrated in ``benchmarks/results/
+#: calibrate_tiers_kink.md`` (406 designs with u in 0.75-0.95).
+_REACHES_CUTOFF_U = 1.0 / math.sqrt(2.0)
 
 #: Grids of the ``"default"`` preset by difficulty: ``(largest aberration_strength, largest
 #: u, grid options, shortcut)``; the first tier whose two bounds hold is used. The coarse
@@ -82,14 +92,16 @@ _TIER0_GRID = dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20))
 #: 5e-5 and 1e-5 in the four tiers. At high SNR the S_e ridges along the OTF's zeros set the
 #: fine radial count (2400); the OTF grids are the smallest that hold the bound. The second
 #: tier first tries the first tier's grid (``TierShortcut``): of the 218 calibration designs
-#: in that tier it kept 119 (55 %), with a worst error of 4.3e-6 among them.
+#: in that tier it kept 119 (55 %), with a worst error of 4.3e-6 among them; it is skipped
+#: for ``u > 1/sqrt(2)`` (``_REACHES_CUTOFF_U``).
 DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
     (1.0, 0.5, _TIER0_GRID, None),
     (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 28)),
      TierShortcut(trial=_TIER0_GRID,
                   check=dict(nodes=(20, 8), se_nodes=(200, 32), overlap_nodes=(16, 16)),
-                  rtol=1e-5)),
-    (15.0, math.inf, dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40)), None),
+                  rtol=1e-5, u_max=_REACHES_CUTOFF_U)),
+    (15.0, _REACHES_CUTOFF_U, dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40)),
+     None),
     (math.inf, math.inf, dict(nodes=(80, 32), se_nodes=(2400, 384), overlap_nodes=(56, 56)),
      None),
 )
@@ -511,7 +523,7 @@ def _tier_plans(options, tiers):
         short = None
         if shortcut is not None:
             short = ({**options, **shortcut.trial}, {**options, **shortcut.check},
-                     float(shortcut.rtol))
+                     float(shortcut.rtol), float(shortcut.u_max))
         full = {**options, **grid}
         if i == len(tiers) - 1:
             full["_remat_otf"] = True
@@ -549,6 +561,11 @@ def _radial_plans(plans):
 def _accepts(trial, check, rtol):
     """Whether a shortcut's ``trial`` value stands (False for non-finite values)."""
     return jnp.abs(trial - check) <= rtol * jnp.abs(trial)
+
+
+def _eligible(operands, u_max):
+    """Whether a shortcut is tried for these operands (``u <= u_max``; batched if ``u`` is)."""
+    return jax.lax.stop_gradient(operands[2]) <= u_max
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
@@ -643,12 +660,18 @@ def _batched_tier(plan, dtype, with_grad, mask, operands, zeros):
 
     if shortcut is None:
         return jax.lax.cond(jnp.any(mask), merit(grid), skip, operands)
-    trial_grid, check_grid, rtol = shortcut
+    trial_grid, check_grid, rtol, u_max = shortcut
 
     def with_shortcut(ops):
-        trial = merit(trial_grid)(ops)
-        check = jax.vmap(functools.partial(_apply_merit, check_grid, dtype))(ops)
-        accepted = _accepts(trial[0] if with_grad else trial, check, rtol)
+        eligible = _eligible(ops, u_max)
+
+        def attempt(ops):
+            trial = merit(trial_grid)(ops)
+            check = jax.vmap(functools.partial(_apply_merit, check_grid, dtype))(ops)
+            return trial, eligible & _accepts(trial[0] if with_grad else trial, check, rtol)
+
+        trial, accepted = jax.lax.cond(jnp.any(mask & eligible), attempt,
+                                       lambda ops: (zeros, jnp.zeros_like(mask)), ops)
         own = jax.lax.cond(jnp.any(mask & ~accepted), merit(grid), skip, ops)
         return jax.tree_util.tree_map(functools.partial(_select, accepted), trial, own)
 
@@ -659,14 +682,39 @@ def _apply_merit(grid, dtype, operands):
     return _merit_value(grid, dtype, *operands)
 
 
+def _shortcut_attempt(shortcut, dtype, operands, with_grad):
+    """A shortcut's trial result (value, or value and gradient) and whether it is kept.
+
+    Trial and check run only when the shortcut is eligible (``lax.cond``); otherwise the
+    result is zeros and not kept. The tier's own grid then runs in one ``lax.cond`` of the
+    caller, so the program holds one copy of it.
+    """
+    trial_grid, check_grid, rtol, u_max = shortcut
+    trial_fn = functools.partial(_apply_merit, trial_grid, dtype)
+    if with_grad:
+        # The trial's gradient is formed with its value: it is the answer more often than
+        # not, and its value alone would cost a second pass when it is.
+        trial_fn = jax.value_and_grad(trial_fn)
+
+    def attempt(ops):
+        trial = trial_fn(ops)
+        check = _apply_merit(check_grid, dtype, ops)
+        return trial, _accepts(trial[0] if with_grad else trial, check, rtol)
+
+    def skip(ops):
+        zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype),
+                                       jax.eval_shape(trial_fn, ops))
+        return zeros, jnp.asarray(False)
+
+    return jax.lax.cond(_eligible(operands, u_max), attempt, skip, operands)
+
+
 def _tier_value(plan, dtype, operands):
     grid, shortcut = plan
     if shortcut is None:
         return _apply_merit(grid, dtype, operands)
-    trial_grid, check_grid, rtol = shortcut
-    trial = _apply_merit(trial_grid, dtype, operands)
-    check = _apply_merit(check_grid, dtype, operands)
-    return jax.lax.cond(_accepts(trial, check, rtol), lambda ops: trial,
+    trial, accepted = _shortcut_attempt(shortcut, dtype, operands, with_grad=False)
+    return jax.lax.cond(accepted, lambda ops: trial,
                         functools.partial(_apply_merit, grid, dtype), operands)
 
 
@@ -675,24 +723,19 @@ def _tier_value_and_grad(plan, dtype, operands):
     full = jax.value_and_grad(functools.partial(_apply_merit, grid, dtype))
     if shortcut is None:
         return full(operands)
-    trial_grid, check_grid, rtol = shortcut
-    # The trial's gradient is formed with its value: it is the answer more often than not,
-    # and its value alone would cost a second pass when it is.
-    trial, gradient = jax.value_and_grad(
-        functools.partial(_apply_merit, trial_grid, dtype))(operands)
-    check = _apply_merit(check_grid, dtype, operands)
-    return jax.lax.cond(_accepts(trial, check, rtol), lambda ops: (trial, gradient), full,
-                        operands)
+    trial, accepted = _shortcut_attempt(shortcut, dtype, operands, with_grad=True)
+    return jax.lax.cond(accepted, lambda ops: trial, full, operands)
 
 
 def _eager_tier_value(plan, dtype, operands):
     """``_tier_value`` for concrete inputs: only the grids needed are compiled and run."""
     grid, shortcut = plan
     if shortcut is not None:
-        trial_grid, check_grid, rtol = shortcut
-        trial = _apply_merit(trial_grid, dtype, operands)
-        if bool(_accepts(trial, _apply_merit(check_grid, dtype, operands), rtol)):
-            return trial
+        trial_grid, check_grid, rtol, u_max = shortcut
+        if bool(_eligible(operands, u_max)):
+            trial = _apply_merit(trial_grid, dtype, operands)
+            if bool(_accepts(trial, _apply_merit(check_grid, dtype, operands), rtol)):
+                return trial
     return _apply_merit(grid, dtype, operands)
 
 
@@ -746,7 +789,8 @@ def jmse(
         for nearly diffraction-limited designs and finer for strongly aberrated ones, with
         ``lax.switch`` under ``jit`` (one tier runs). The middle tier first tries the first
         tier's grid and keeps its value when a coarse check grid agrees with it to 1e-5
-        (``TierShortcut``): about half of that tier's designs, the paper's Fig. 1 point
+        (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the band reaches
+        the cutoff): about half of that tier's designs, the paper's Fig. 1 point
         among them, then cost what the first tier costs, and the others pay the two cheap
         grids on top of their own. Under ``vmap`` a tier runs, for the whole batch, only
         if one of the batch's designs selects it (and a shortcut's own grid only if one

@@ -61,6 +61,11 @@ def test_tier_index_honours_both_bounds():
     assert int(_tier_index(0.5, 0.8, tiers)) == 1  # a band reaching the cutoff skips tier 0
     assert int(_tier_index(3.0, 0.2, tiers)) == 1
     assert int(_tier_index(10.0, 0.2, tiers)) == 2
+    # Rays reaching the cutoff (u > 1/sqrt(2)) need the fourth tier's radial nodes from
+    # strength 5 on; weaker designs keep the second tier's grid.
+    assert int(_tier_index(10.0, 0.72, tiers)) == 3
+    assert int(_tier_index(3.0, 0.72, tiers)) == 1
+    assert int(_tier_index(10.0, 0.7, tiers)) == 2
     assert int(_tier_index(50.0, 0.2, tiers)) == 3
     assert [t[0] for t in tiers] == sorted(t[0] for t in tiers) and tiers[-1][0] == math.inf
 
@@ -82,7 +87,7 @@ def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
     if shortcut is not None:  # the rule, restated: keep the trial when the check agrees
         trial = _fixed(ab, field, u, shortcut.trial)
         check = _fixed(ab, field, u, shortcut.check)
-        accepted = abs(trial - check) <= shortcut.rtol * abs(trial)
+        accepted = u <= shortcut.u_max and abs(trial - check) <= shortcut.rtol * abs(trial)
         assert path == ("trial" if accepted else "grid")
         if accepted:
             grid = shortcut.trial
@@ -231,6 +236,35 @@ def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch):
     # The value-only rule is checked with the real tiers above
     # (test_vmap_over_designs_in_different_tiers).
     assert_vmap_matches_singles(merit, [(ab, f) for ab, f, _, _ in designs])
+
+
+def test_shortcut_is_tried_only_up_to_u_max(monkeypatch):
+    """Above ``u_max`` a tier skips its shortcut and runs its own grid, in every path (eager,
+    jit, value_and_grad, vmap over u mixing both sides). With ``rtol = 1`` an eligible
+    design always keeps the trial, so the oracle is the trial grid below ``u_max`` and the
+    tier's grid above it. (The default's ``u_max`` is 1/sqrt(2): beyond it the trial and
+    check grids missed H's edge at the cutoff alike and agreed on a value 2e-4 off.)"""
+    trial = dict(nodes=(8, 4), se_nodes=(40, 16), overlap_nodes=(8, 8))
+    check = dict(nodes=(6, 4), se_nodes=(30, 12), overlap_nodes=(6, 6))
+    tiers = ((math.inf, math.inf, _SMALL,
+              jj.TierShortcut(trial=trial, check=check, rtol=1.0, u_max=0.3)),)
+    assert jj.DEFAULT_TIERS[1][3].u_max == pytest.approx(1 / math.sqrt(2))
+    monkeypatch.setitem(jj.PRESETS["default"], "tiers", tiers)
+    ab, field, _, _ = DESIGNS[1]
+    us = (0.2, 0.3, 0.4)
+    expected = [_fixed(ab, field, u, trial if u <= 0.3 else _SMALL) for u in us]
+    assert abs(expected[2] / _fixed(ab, field, 0.4, trial) - 1) > 1e-3  # the grids differ
+    eager = [float(jj.jmse(ab, field, u, SIGNAL, NOISE)) for u in us]
+    vag = jax.jit(jax.value_and_grad(lambda a, u: jj.jmse(a, field, u, SIGNAL, NOISE)))
+    batched = jax.jit(jax.vmap(vag, in_axes=(None, 0)))(ab, jnp.asarray(us))
+    for i, u in enumerate(us):
+        oracle = jax.value_and_grad(lambda a, u=u: jj.jmse(
+            a, field, u, SIGNAL, NOISE, **(trial if u <= 0.3 else _SMALL)))(ab)
+        value, gradient = vag(ab, u)
+        np.testing.assert_allclose([eager[i], value, batched[0][i]], expected[i], rtol=1e-13)
+        for name in ("w020", "w222"):
+            np.testing.assert_allclose([getattr(gradient, name), getattr(batched[1], name)[i]],
+                                       getattr(oracle[1], name), rtol=1e-10)
 
 
 def test_second_derivatives_of_the_default(monkeypatch):
