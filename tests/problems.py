@@ -20,12 +20,13 @@ The two methods agree on all seven within the polar grid's own estimate (``test_
 Cases whose estimate exceeds ``CONVERGED_RTOL`` are kept listed but excluded from accuracy
 checks (see ``Problem.converged``).
 
-Convergence (run of 2026-11-23): 26 of 29 cases converge to <= 1e-6 (most to 1e-13;
-``all_5_field_0.8`` 7.2e-7, ``hypercube_0`` 3.1e-8; the one-ray references to 3e-13 or
-better). NOT converged, kept listed and excluded from the 1e-4 check: ``astigmatism_m6``
-(2.7e-5), limited by ``se_nodes`` (S_e ridges along the OTF zeros at high SNR), and the
-wide-band cases ``wide_u1_noise_1e-4`` (1.6e-5) and ``wide_u1_strong`` (8.6e-6), where
-``high`` is the unconverged one: ``FINE_REFERENCES`` holds checked values for those two.
+Convergence (run of 2026-11-23; the two ``kink_*`` cases added on 2026-11-24): 27 of 31
+cases converge to <= 1e-6 (most to 1e-13; ``all_5_field_0.8`` 7.2e-7, ``hypercube_0``
+3.1e-8; the one-ray references to 3e-13 or better). NOT converged, kept listed and excluded
+from the 1e-4 check: ``astigmatism_m6`` (2.7e-5), limited by ``se_nodes`` (S_e ridges along
+the OTF zeros at high SNR), and the wide-band cases ``wide_u1_noise_1e-4`` (1.6e-5),
+``wide_u1_strong`` (8.6e-6) and ``kink_u0.8_strong`` (1.5e-5), where ``high`` is the
+unconverged one: ``FINE_REFERENCES`` holds checked values for those three.
 (``defocus_6_noise_1e-4`` has the same polar limit, 1.9e-5, but a one-ray reference.)
 """
 
@@ -161,6 +162,13 @@ PROBLEMS: tuple[Problem, ...] = (
     _hypercube("wide_u1_noise_1e-4", (2.263, 0.073, 0.1, 1.868, 1.143), 0.427, 1.0, 1e-4),
     _hypercube("wide_u1_strong", (1.856, -0.498, -1.603, 1.152, 2.181), 0.713, 1.0, 1e-4),
     _hypercube("wide_u0.7_field_1", (-1.519, -1.708, -1.89, -0.423, 0.035), 0.996, 0.7, 1e-4),
+    # Bands whose rays reach the cutoff at some angles only (1/sqrt(2) < u < 1), from the
+    # kink-range calibration (benchmarks/results/calibrate_tiers_kink.md): the middle tier's
+    # shortcut kept a trial 2.1e-4 off on the first, the third tier's grid was 5.3e-4 off on
+    # the second (before both were bounded at u <= 1/sqrt(2)).
+    _hypercube("kink_u0.85_shortcut", (-3.779527, 2.028105, 0.305147, -1.362147, 2.307427),
+               0.303195, 0.85, 8.07227e-4),
+    _hypercube("kink_u0.8_strong", (-5.72, 4.792, 2.981, -4.601, -3.719), 0.939, 0.8, 3.44e-4),
 )
 
 #: Alias used by the benchmarks.
@@ -201,16 +209,22 @@ REFERENCES: dict[str, tuple[float, float]] = {
     'wide_u1_noise_1e-4': (0.020975465357859567, 0.020975809377279532),  # 1.6e-05  NOT CONVERGED
     'wide_u1_strong': (0.01276271761128109, 0.012762608097269233),  # 8.6e-06  NOT CONVERGED
     'wide_u0.7_field_1': (0.017739685484585953, 0.017739685482530642),  # 1.2e-10
+    'kink_u0.85_shortcut': (0.017633357330392903, 0.017633357330368873),  # 1.4e-12
+    'kink_u0.8_strong': (0.02140697477496707, 0.02140664802455847),  # 1.5e-05  NOT CONVERGED
 }
 # REFERENCES-END
 
 #: Finer references for the wide-band cases that ``high`` does not resolve (so they are
 #: flagged NOT CONVERGED above): ``nodes=(96, 56), se_nodes=(4800, 2400),
-#: overlap_nodes=(96, 96)``. Against STRICT_OPTIONS they move by 1.7e-6 and 1.0e-7, and
-#: ``nodes=(128, 72)`` changes STRICT's value by < 1e-13: converged to a few 1e-6.
+#: overlap_nodes=(96, 96)``. Against STRICT_OPTIONS they move by 1.7e-6, 1.0e-7 and 7.9e-8,
+#: and ``nodes=(128, 72)`` changes STRICT's value by < 1e-13 on the first two: converged to
+#: a few 1e-6. (``kink_u0.8_strong``: ``nodes=(112, 64)`` gives 6.8e-8 from STRICT's value;
+#: ``high`` is 1.5e-5 off, limited by its radial counts: 64 -> 96 OTF nodes leaves -7e-6,
+#: and with ``se_nodes=(3200, 1920)`` too -9e-9.)
 FINE_REFERENCES: dict[str, float] = {
     'wide_u1_noise_1e-4': 0.02097577325199456,
     'wide_u1_strong': 0.012762609426121934,
+    'kink_u0.8_strong': 0.02140664971482053,
 }
 
 # RAY-REFERENCES-BEGIN
