@@ -19,7 +19,8 @@ returned.
 ``--u`` replaces the values ``u`` is drawn from (the last line samples only the range
 ``1/sqrt(2) < u < 1``, where the angular rule is split at ``arccos u``), ``--current`` limits
 the candidates to the default's present tiers and its shortcut's check grid, and ``--name``
-names the result files.
+names the result files. ``--summarise`` rewrites ``results/<name>.md`` from the JSON of an
+earlier run (after a change of the tier rules: the tiers' grids are the same).
 
 Writes ``results/<name>.json`` (every design, reference and error) and ``results/<name>.md``
 (the summary); ``<name>`` is ``calibrate_tiers`` unless given.
@@ -28,6 +29,7 @@ Writes ``results/<name>.json`` (every design, reference and error) and ``results
 from __future__ import annotations
 
 import argparse
+import json
 import time
 
 import _common as common
@@ -158,39 +160,54 @@ def summary(rows: list[dict], candidates=CANDIDATES) -> str:
 
 
 def shortcut_summary(rows: list[dict]) -> list[str]:
-    """How the middle tier's shortcut fares on the designs the default sends to that tier."""
+    """How the middle tier's shortcut fares on the designs the default sends to that tier.
+
+    The shortcut is tried only for ``u <= u_max``; designs above the bound are reported
+    separately as if it were tried there (the evidence for the bound)."""
     from jmse_jax._merit import _accepts, _tier_index
 
     shortcut = jj.DEFAULT_TIERS[1][3]
     trial_name = next(k for k in CANDIDATES if CANDIDATES[k] == shortcut.trial)
     grid_name = next(k for k in CANDIDATES if CANDIDATES[k] == jj.DEFAULT_TIERS[1][2])
     middle = [r for r in rows if int(_tier_index(r["strength"], r["u"], jj.DEFAULT_TIERS)) == 1]
-    kept, returned, ratios = [], [], []
-    for r in middle:
-        trial, check = r["values"][trial_name], r["values"]["shortcut check"]
-        difference = abs(trial - check) / abs(trial)
-        accepted = bool(_accepts(trial, check, shortcut.rtol))
-        if shortcut.rtol / 10 < difference:  # near the threshold, where the ratio matters
-            ratios.append(r["errors"][trial_name] / difference)
-        if accepted:
-            kept.append(r["errors"][trial_name])
-        returned.append(r["errors"][trial_name] if accepted else r["errors"][grid_name])
-    return [
+    lines = [
         "",
         "## The middle tier's shortcut",
         "",
-        f"Rule: keep the trial grid `{trial_name}` ({shortcut.trial}) when it agrees with the "
-        f"check grid ({shortcut.check}) to rtol {shortcut.rtol:g}; otherwise use the tier's own "
-        f"grid `{grid_name}`. On the {len(middle)} designs the default sends to the middle tier:",
+        f"Rule: for u <= {shortcut.u_max:.4g}, keep the trial grid `{trial_name}` "
+        f"({shortcut.trial}) when it agrees with the check grid ({shortcut.check}) to rtol "
+        f"{shortcut.rtol:g}; otherwise (and above that u) use the tier's own grid "
+        f"`{grid_name}`. Of the {len(middle)} designs the default sends to the middle tier:",
         "",
-        f"- trial kept on {len(kept)} ({100 * len(kept) / len(middle):.0f} %), worst error of "
-        f"a kept trial {max(kept):.1e};",
-        f"- worst error of the value returned {max(returned):.1e} (median "
-        f"{np.median(returned):.1e});",
-        f"- largest ratio of the trial's error to its difference from the check, over the "
-        f"{len(ratios)} designs whose difference exceeds rtol / 10: {max(ratios):.2f} (below "
-        f"1, the difference bounds the error).",
     ]
+    eligible = [r for r in middle if r["u"] <= shortcut.u_max]
+    above = [r for r in middle if r["u"] > shortcut.u_max]
+    for group, label in ((eligible, f"u <= {shortcut.u_max:.4g} (the shortcut is tried)"),
+                         (above, f"u > {shortcut.u_max:.4g} (not tried; shown as if it were)")):
+        if not group:
+            lines.append(f"- {label}: no designs.")
+            continue
+        kept, returned, ratios = [], [], []
+        for r in group:
+            trial, check = r["values"][trial_name], r["values"]["shortcut check"]
+            difference = abs(trial - check) / abs(trial)
+            accepted = bool(_accepts(trial, check, shortcut.rtol))
+            if shortcut.rtol / 10 < difference:  # near the threshold, where the ratio matters
+                ratios.append(r["errors"][trial_name] / difference)
+            if accepted:
+                kept.append(r["errors"][trial_name])
+            returned.append(r["errors"][trial_name] if accepted else r["errors"][grid_name])
+        worst_kept = f", worst error of a kept trial {max(kept):.1e}" if kept else ""
+        ratio = (f"; largest ratio of the trial's error to its difference from the check, "
+                 f"over the {len(ratios)} designs whose difference exceeds rtol / 10: "
+                 f"{max(ratios):.2f} (below 1, the difference bounds the error)"
+                 if ratios else "")
+        lines.append(
+            f"- {label}, {len(group)} designs: trial kept on {len(kept)} "
+            f"({100 * len(kept) / len(group):.0f} %){worst_kept}; worst error of the value "
+            f"the rule would return {max(returned):.1e} (median {np.median(returned):.1e})"
+            f"{ratio}.")
+    return lines
 
 
 def main(argv=None) -> int:
@@ -202,7 +219,18 @@ def main(argv=None) -> int:
     parser.add_argument("--current", action="store_true",
                         help="only the default's present tiers and shortcut check")
     parser.add_argument("--name", default="calibrate_tiers", help="name of the result files")
+    parser.add_argument("--summarise", action="store_true",
+                        help="rewrite results/<name>.md from results/<name>.json (no new run)")
     args = parser.parse_args(argv)
+    if args.summarise:
+        report = json.loads((common.RESULTS / f"{args.name}.json").read_text())
+        candidates = {name: {key: tuple(value) if isinstance(value, list) else value
+                             for key, value in grid.items()}
+                      for name, grid in report["candidates"].items()}
+        text = summary(report["designs"], candidates)
+        (common.RESULTS / f"{args.name}.md").write_text(text)
+        print(text)
+        return 0
     for u in args.u:
         if not 0 < u <= 1:
             parser.error(f"--u values must lie in (0, 1], got {u}")
