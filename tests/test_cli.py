@@ -191,3 +191,45 @@ def test_reproduce_quick_writes_figures_and_report(capsys, tmp_path):
         "samples"]
     assert min(left["d_cubic"][0]) > 0.1  # L = 2 rings
     assert "Fig. 4 left" in (tmp_path / "reproduce.md").read_text()
+
+
+# --------------------------------------------------------------------------------------
+# the console script's compilation cache
+# --------------------------------------------------------------------------------------
+
+
+def _eval_in_subprocess(tmp_path, *extra):
+    """``jmse-jax eval`` (fast preset, Fig. 1 point) in a fresh process with its own
+    ``XDG_CACHE_HOME`` and no ``JAX_COMPILATION_CACHE_DIR``; returns its JSON output."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "cache")
+    out_json = tmp_path / "eval.json"
+    subprocess.run([sys.executable, "-m", "jmse_jax.cli", *extra, "eval", "--point", "fig1",
+                    "--preset", "fast", "--nu", "0.1", "--out-json", str(out_json)],
+                   env=env, check=True, capture_output=True, timeout=600)
+    return json.loads(out_json.read_text())
+
+
+def test_compile_cache_is_kept_between_runs_and_can_be_turned_off(tmp_path):
+    off = _eval_in_subprocess(tmp_path, "--no-compile-cache")
+    assert not (tmp_path / "cache").exists()
+    first = _eval_in_subprocess(tmp_path)
+    folder = tmp_path / "cache" / "jmse_jax" / "xla"
+    entries = sorted(p.name for p in folder.iterdir())
+    assert entries, "the first run wrote no compiled program"
+    second = _eval_in_subprocess(tmp_path)
+    # The second run reads the programs back (writes nothing new) and gives the same numbers.
+    assert sorted(p.name for p in folder.iterdir()) == entries
+    assert first == second == off
+
+
+def test_compile_cache_location_follows_xdg(monkeypatch, tmp_path):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert cli.compile_cache_dir() == tmp_path / "jmse_jax" / "xla"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert cli.compile_cache_dir() == tmp_path / "home" / ".cache" / "jmse_jax" / "xla"
