@@ -156,11 +156,16 @@ def evaluate(settings: dict) -> dict:
     import numpy as np
 
     import jmse_jax as jj
+    from jmse_jax._merit import _validate
 
     ab = jj.Seidel(**{k: settings[k] for k in COEFFICIENTS})
     signal, noise = parse_signal(settings["signal"]), jj.WhiteNoise(settings["noise"])
     field, u, preset = settings["field"], settings["u"], settings["preset"]
-    value, grad = jax.value_and_grad(jj.jmse)(ab, field, u, signal, noise, preset=preset)
+    # Checked here, with the messages jmse gives: under jit its checks see traced values. One
+    # compiled program (kept by the compilation cache) serves every field, u and spectrum.
+    _validate(ab, field, u, signal, noise)
+    merit = jax.jit(jax.value_and_grad(jj.jmse), static_argnames="preset")
+    value, grad = merit(ab, field, u, signal, noise, preset=preset)
     nu = np.asarray(settings["nu"], dtype=float)
     zeros = np.zeros_like(nu)
     h_x = np.asarray(jj.otf(ab, nu, zeros, field))
