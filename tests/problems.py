@@ -20,14 +20,15 @@ The two methods agree on all seven within the polar grid's own estimate (``test_
 Cases whose estimate exceeds ``CONVERGED_RTOL`` are kept listed but excluded from accuracy
 checks (see ``Problem.converged``).
 
-Convergence (run of 2026-11-23; the two ``kink_*`` cases added on 2026-11-24): 27 of 31
-cases converge to <= 1e-6 (most to 1e-13; ``all_5_field_0.8`` 7.2e-7, ``hypercube_0``
-3.1e-8; the one-ray references to 3e-13 or better). NOT converged, kept listed and excluded
-from the 1e-4 check: ``astigmatism_m6`` (2.7e-5), limited by ``se_nodes`` (S_e ridges along
-the OTF zeros at high SNR), and the wide-band cases ``wide_u1_noise_1e-4`` (1.6e-5),
-``wide_u1_strong`` (8.6e-6) and ``kink_u0.8_strong`` (1.5e-5), where ``high`` is the
-unconverged one: ``FINE_REFERENCES`` holds checked values for those three.
-(``defocus_6_noise_1e-4`` has the same polar limit, 1.9e-5, but a one-ray reference.)
+Convergence (run of 2026-11-24, with the ``high`` grid of that day: nodes (80, 40), se_nodes
+(2800, 960)): 30 of 31 cases converge to <= 1e-6 (most to 1e-13; ``defocus_6_noise_1e-4``
+5.4e-7 on the polar grid, ``kink_u0.8_strong`` 4.4e-7, ``wide_u1_strong`` 1.8e-7; the
+one-ray references to 3e-13 or better). NOT converged, kept listed and excluded from the
+1e-4 check: ``wide_u1_noise_1e-4`` (1.2e-6), where STRICT_OPTIONS is the less accurate of
+the two (1.7e-6 from a finer grid): ``FINE_REFERENCES`` holds checked values for it and
+two other hard wide-band cases. (With the former ``high`` grid, (64, 40) and (1600, 960),
+four cases were not converged, up to 2.7e-5: ``astigmatism_m6``, limited by the fine radial
+S_e count at high SNR, and three wide bands, limited by the radial OTF count at the cutoff.)
 """
 
 from __future__ import annotations
@@ -177,50 +178,49 @@ BANK = PROBLEMS
 PROBLEMS_BY_NAME = {p.name: p for p in PROBLEMS}
 
 # REFERENCES-BEGIN
-# Computed by tests/make_references.py on 2026-11-23 (jax 0.10.2, float64, CPU).
+# Computed by tests/make_references.py on 2026-11-24 (jax 0.10.2, float64, CPU).
 # name: (the high preset's polar grid, STRICT_OPTIONS); comment: abs(high - strict) / strict
 REFERENCES: dict[str, tuple[float, float]] = {
-    'fig1': (0.0026539432366384365, 0.002653943236638479),  # 1.6e-14
-    'fig1_defocus_m6': (0.0035719197871257762, 0.0035719197871256344),  # 4.0e-14
-    'fig1_small_u': (9.84221610572597e-05, 9.842216105726437e-05),  # 4.7e-14
-    'fig1_noise_1e-4': (0.0004424468903793989, 0.0004424468903794496),  # 1.1e-13
-    'fig1_noise_1e-2': (0.008950651960516658, 0.008950651960516207),  # 5.0e-14
-    'fig1_u_0.5': (0.01251285461137641, 0.012512854611376448),  # 3.0e-15
-    'fig1_defocus_m6_u_0.1_noise_1e-4': (9.133152095071075e-05, 9.133152095598634e-05),  # 5.8e-11
-    'diffraction_limited': (4.00130275830826e-05, 4.001302758308242e-05),  # 4.4e-15
-    'defocus_0.5': (0.0006238609462712674, 0.0006238609462713063),  # 6.2e-14
-    'defocus_m6': (0.03039087195991739, 0.030390869833270204),  # 7.0e-08
-    'defocus_6_noise_1e-4': (0.015206950074224176, 0.015206663665474246),  # 1.9e-05  NOT CONVERGED
-    'spherical_6_balanced': (0.01258489051370311, 0.012584890513705784),  # 2.1e-13
-    'coma_6': (0.0035390148237390956, 0.0035390148237390085),  # 2.5e-14
-    'astigmatism_m6': (0.026655837526797628, 0.02665655716426009),  # 2.7e-05  NOT CONVERGED
-    'field_curvature_6_u_0.1': (0.012940697140331369, 0.012940695110392472),  # 1.6e-07
-    'all_5_field_0.8': (0.06767982710565544, 0.06767987565186173),  # 7.2e-07
-    'powerlaw_fig1': (0.0004939944464474761, 0.000493994446447455),  # 4.3e-14
-    'powerlaw_defocus_m3_u_0.4': (0.0014114937722321367, 0.001411493772232151),  # 1.0e-14
-    'hypercube_0': (0.03881796325060716, 0.03881796205552764),  # 3.1e-08
-    'hypercube_1': (0.000646428184599205, 0.0006464281845992216),  # 2.6e-14
-    'hypercube_2': (0.015615803338350397, 0.01561580333503021),  # 2.1e-10
-    'hypercube_3': (0.04833892364030884, 0.04833892358539163),  # 1.1e-09
-    'hypercube_4': (0.003365469705394602, 0.0033654697053943417),  # 7.7e-14
-    'hypercube_5': (0.041460307973126144, 0.04146030814663732),  # 4.2e-09
-    'hypercube_6': (0.0019376438112951974, 0.0019376438112951345),  # 3.2e-14
-    'hypercube_7': (0.005368575394169649, 0.005368575394169169),  # 8.9e-14
-    'wide_u1_noise_1e-4': (0.020975465357859567, 0.020975809377279532),  # 1.6e-05  NOT CONVERGED
-    'wide_u1_strong': (0.01276271761128109, 0.012762608097269233),  # 8.6e-06  NOT CONVERGED
-    'wide_u0.7_field_1': (0.017739685484585953, 0.017739685482530642),  # 1.2e-10
-    'kink_u0.85_shortcut': (0.017633357330392903, 0.017633357330368873),  # 1.4e-12
-    'kink_u0.8_strong': (0.02140697477496707, 0.02140664802455847),  # 1.5e-05  NOT CONVERGED
+    'fig1': (0.0026539432366384404, 0.0026539432366384785),  # 1.4e-14
+    'fig1_defocus_m6': (0.003571919787125798, 0.003571919787125635),  # 4.6e-14
+    'fig1_small_u': (9.842216105726014e-05, 9.842216105726437e-05),  # 4.3e-14
+    'fig1_noise_1e-4': (0.00044244689037940154, 0.0004424468903794497),  # 1.1e-13
+    'fig1_noise_1e-2': (0.00895065196051665, 0.008950651960516207),  # 4.9e-14
+    'fig1_u_0.5': (0.012512854611376438, 0.012512854611376448),  # 8.3e-16
+    'fig1_defocus_m6_u_0.1_noise_1e-4': (9.133152095600599e-05, 9.13315209559863e-05),  # 2.2e-13
+    'diffraction_limited': (4.001302758308262e-05, 4.001302758308242e-05),  # 4.9e-15
+    'defocus_0.5': (0.0006238609462712692, 0.0006238609462713063),  # 5.9e-14
+    'defocus_m6': (0.030390869846401904, 0.030390869833270197),  # 4.3e-10
+    'defocus_6_noise_1e-4': (0.015206671850621583, 0.015206663665474242),  # 5.4e-07
+    'spherical_6_balanced': (0.012584890513703338, 0.012584890513705784),  # 1.9e-13
+    'coma_6': (0.0035390148237390982, 0.0035390148237390085),  # 2.5e-14
+    'astigmatism_m6': (0.026656559654710796, 0.02665655716426009),  # 9.3e-08
+    'field_curvature_6_u_0.1': (0.012940695111173225, 0.012940695110392475),  # 6.0e-11
+    'all_5_field_0.8': (0.06767987711086133, 0.06767987565186175),  # 2.2e-08
+    'powerlaw_fig1': (0.000493994446447476, 0.000493994446447455),  # 4.3e-14
+    'powerlaw_defocus_m3_u_0.4': (0.0014114937722321489, 0.001411493772232151),  # 1.5e-15
+    'hypercube_0': (0.038817962054608426, 0.038817962055527636),  # 2.4e-11
+    'hypercube_1': (0.0006464281845992061, 0.0006464281845992216),  # 2.4e-14
+    'hypercube_2': (0.015615803338236072, 0.01561580333503021),  # 2.1e-10
+    'hypercube_3': (0.04833892358539016, 0.04833892358539162),  # 3.0e-14
+    'hypercube_4': (0.003365469705394594, 0.0033654697053943417),  # 7.5e-14
+    'hypercube_5': (0.041460308146003336, 0.04146030814663731),  # 1.5e-11
+    'hypercube_6': (0.0019376438112951922, 0.0019376438112951345),  # 3.0e-14
+    'hypercube_7': (0.005368575394169657, 0.005368575394169167),  # 9.1e-14
+    'wide_u1_noise_1e-4': (0.02097578519219391, 0.020975809377279532),  # 1.2e-06  NOT CONVERGED
+    'wide_u1_strong': (0.012762610446053068, 0.012762608097269233),  # 1.8e-07
+    'wide_u0.7_field_1': (0.017739685482514308, 0.017739685482530645),  # 9.2e-13
+    'kink_u0.85_shortcut': (0.01763335733036856, 0.017633357330368873),  # 1.8e-14
+    'kink_u0.8_strong': (0.0214066386744958, 0.02140664802455847),  # 4.4e-07
 }
 # REFERENCES-END
 
-#: Finer references for the wide-band cases that ``high`` does not resolve (so they are
-#: flagged NOT CONVERGED above): ``nodes=(96, 56), se_nodes=(4800, 2400),
+#: Finer references for hard wide-band cases, ``nodes=(96, 56), se_nodes=(4800, 2400),
 #: overlap_nodes=(96, 96)``. Against STRICT_OPTIONS they move by 1.7e-6, 1.0e-7 and 7.9e-8,
 #: and ``nodes=(128, 72)`` changes STRICT's value by < 1e-13 on the first two: converged to
-#: a few 1e-6. (``kink_u0.8_strong``: ``nodes=(112, 64)`` gives 6.8e-8 from STRICT's value;
-#: ``high`` is 1.5e-5 off, limited by its radial counts: 64 -> 96 OTF nodes leaves -7e-6,
-#: and with ``se_nodes=(3200, 1920)`` too -9e-9.)
+#: a few 1e-6. ``high`` is within 5.7e-7, 8.0e-8 and 5.2e-7 of them (the former ``high``
+#: grid was 1.5e-5, 8.5e-6 and 1.5e-5 off). (``kink_u0.8_strong``: ``nodes=(112, 64)``
+#: gives 6.8e-8 from STRICT's value.)
 FINE_REFERENCES: dict[str, float] = {
     'wide_u1_noise_1e-4': 0.02097577325199456,
     'wide_u1_strong': 0.012762609426121934,
@@ -228,13 +228,13 @@ FINE_REFERENCES: dict[str, float] = {
 }
 
 # RAY-REFERENCES-BEGIN
-# Computed by tests/make_references.py on 2026-11-23 (jax 0.10.2, float64, CPU).
+# Computed by tests/make_references.py on 2026-11-24 (jax 0.10.2, float64, CPU).
 # name: (RAY_STRICT_OPTIONS, RAY_FINE_OPTIONS); comment: abs(strict - fine) / fine
 RAY_REFERENCES: dict[str, tuple[float, float]] = {
     'diffraction_limited': (4.0013027583082856e-05, 4.001302758308283e-05),  # 6.8e-16
     'defocus_0.5': (0.000623860946271294, 0.0006238609462712734),  # 3.3e-14
     'defocus_m6': (0.030390869829826143, 0.030390869829826157),  # 4.6e-16
-    'defocus_6_noise_1e-4': (0.015206660320062204, 0.01520666032005967),  # 1.7e-13
+    'defocus_6_noise_1e-4': (0.015206660320062201, 0.01520666032005967),  # 1.7e-13
     'spherical_6_balanced': (0.012584890513705631, 0.012584890513701635),  # 3.2e-13
     'field_curvature_6_u_0.1': (0.012940695110354495, 0.012940695110354889),  # 3.0e-14
     'powerlaw_defocus_m3_u_0.4': (0.001411493772232145, 0.0014114937722321571),  # 8.6e-15
