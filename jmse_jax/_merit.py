@@ -78,7 +78,7 @@ _TIER0_GRID = dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20))
 #: ``(1 - r)^{3/2}`` edge, or end just short of it, and polynomial interpolation along the
 #: rays needs more radial OTF nodes. There the middle tier's shortcut is not tried (its
 #: trial and check grids missed the edge alike: at u = 0.85 both were 2.1e-4 off and agreed
-#: to 3e-6), and designs of strength 5-15 skip the third tier (56 radial nodes: 5.4e-4 off
+#: to 6e-6), and designs of strength 5-15 skip the third tier (56 radial nodes: 5.4e-4 off
 #: at u = 0.8; the fourth's 80: 2e-6). Calibrated in ``benchmarks/results/
 #: calibrate_tiers_kink.md`` (406 designs with u in 0.75-0.95).
 _REACHES_CUTOFF_U = 1.0 / math.sqrt(2.0)
