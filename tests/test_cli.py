@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -201,10 +204,6 @@ def test_reproduce_quick_writes_figures_and_report(capsys, tmp_path):
 def _eval_in_subprocess(tmp_path, *extra):
     """``jmse-jax eval`` (fast preset, Fig. 1 point) in a fresh process with its own
     ``XDG_CACHE_HOME`` and no ``JAX_COMPILATION_CACHE_DIR``; returns its JSON output."""
-    import os
-    import subprocess
-    import sys
-
     env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
     env["XDG_CACHE_HOME"] = str(tmp_path / "cache")
     out_json = tmp_path / "eval.json"
