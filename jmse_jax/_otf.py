@@ -371,8 +371,18 @@ def otf(
             raise ValueError(f"nodes must be a pair (n_phi, n_t), got {nodes!r}")
         check_count("nodes[0] (n_phi)", nodes[0])
         check_count("nodes[1] (n_t)", nodes[1])
-        return _otf_overlap(aberrations, nu_x, nu_y, field, (int(nodes[0]), int(nodes[1])))
+        return _compiled_otf(method, (int(nodes[0]), int(nodes[1])), aberrations, nu_x, nu_y,
+                             field)
     check_count("B", B)
+    return _compiled_otf(method, int(B), aberrations, nu_x, nu_y, field)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _compiled_otf(method, setting, aberrations, nu_x, nu_y, field):
+    """The engine ``method`` (``setting``: its nodes or ``B``), compiled once per input shape
+    (outside ``jit`` the engines would otherwise run primitive by primitive)."""
+    if method == "overlap":
+        return _otf_overlap(aberrations, nu_x, nu_y, field, setting)
     if method == "nudft":
-        return _otf_nudft(aberrations, nu_x, nu_y, field, B)
-    return _otf_fft(aberrations, nu_x, nu_y, field, B)
+        return _otf_nudft(aberrations, nu_x, nu_y, field, setting)
+    return _otf_fft(aberrations, nu_x, nu_y, field, setting)
