@@ -593,12 +593,15 @@ def _switched_merit(static, index, operands):
     the trial.
     """
     plans, dtype = static.value
-    return _dispatch(plans, dtype, with_grad=False)(index, operands)
+    return _dispatch(plans, dtype, with_grad=None)(index, operands)
 
 
 def _dispatch(plans, dtype, with_grad):
     """``lax.switch`` over the tiers (their value, or value and gradient), with a batching
     rule that skips the tiers a batch does not use.
+
+    ``with_grad`` is None for the value alone, else a tuple of booleans, one per leaf of the
+    operands: the gradient (a list) is taken in the leaves marked True (``_value_and_grad``).
 
     ``vmap`` of a ``lax.switch`` or ``lax.cond`` whose index is batched evaluates every
     branch for every design and selects. The rule instead runs each tier, vectorised over
@@ -608,8 +611,11 @@ def _dispatch(plans, dtype, with_grad):
     grid only if a design of the tier refuses its trial. Each design gets exactly what it
     gets alone; a batch of designs from one tier costs one tier.
     """
-    single = _tier_value_and_grad if with_grad else _tier_value
-    branches = [functools.partial(single, plan, dtype) for plan in plans]
+    if with_grad is None:
+        branches = [functools.partial(_tier_value, plan, dtype) for plan in plans]
+    else:
+        branches = [functools.partial(_tier_value_and_grad, plan, dtype, with_grad)
+                    for plan in plans]
 
     def switch(index, operands):
         return jax.lax.switch(index, branches, operands)
@@ -659,7 +665,7 @@ def _batched_tier(plan, dtype, with_grad, mask, operands, zeros):
 
     def merit(options):
         fn = functools.partial(_apply_merit, options, dtype)
-        return jax.vmap(jax.value_and_grad(fn) if with_grad else fn)
+        return jax.vmap(fn if with_grad is None else _value_and_grad(fn, with_grad))
 
     def skip(ops):
         return zeros
@@ -674,7 +680,8 @@ def _batched_tier(plan, dtype, with_grad, mask, operands, zeros):
         def attempt(ops):
             trial = merit(trial_grid)(ops)
             check = jax.vmap(functools.partial(_apply_merit, check_grid, dtype))(ops)
-            return trial, eligible & _accepts(trial[0] if with_grad else trial, check, rtol)
+            value = trial if with_grad is None else trial[0]
+            return trial, eligible & _accepts(value, check, rtol)
 
         trial, accepted = jax.lax.cond(jnp.any(mask & eligible), attempt,
                                        lambda ops: (zeros, jnp.zeros_like(mask)), ops)
@@ -695,6 +702,23 @@ def _grid_merit(grid, dtype, operands):
     return _merit_value(grid.value, dtype, *operands)
 
 
+def _value_and_grad(fn, wrt):
+    """``value_and_grad`` of ``fn(operands)`` in the leaves of ``operands`` marked True in
+    ``wrt``; the gradient is the list of those leaves' gradients."""
+
+    def value_and_grad(operands):
+        leaves, treedef = jax.tree_util.tree_flatten(operands)
+
+        def of_live(live):
+            it = iter(live)
+            full = [next(it) if w else leaf for leaf, w in zip(leaves, wrt, strict=True)]
+            return fn(jax.tree_util.tree_unflatten(treedef, full))
+
+        return jax.value_and_grad(of_live)([leaf for leaf, w in zip(leaves, wrt, strict=True) if w])
+
+    return value_and_grad
+
+
 def _shortcut_attempt(shortcut, dtype, operands, with_grad):
     """A shortcut's trial result (value, or value and gradient) and whether it is kept.
 
@@ -704,15 +728,15 @@ def _shortcut_attempt(shortcut, dtype, operands, with_grad):
     """
     trial_grid, check_grid, rtol, u_max = shortcut
     trial_fn = functools.partial(_apply_merit, trial_grid, dtype)
-    if with_grad:
+    if with_grad is not None:
         # The trial's gradient is formed with its value: it is the answer more often than
         # not, and its value alone would cost a second pass when it is.
-        trial_fn = jax.value_and_grad(trial_fn)
+        trial_fn = _value_and_grad(trial_fn, with_grad)
 
     def attempt(ops):
         trial = trial_fn(ops)
         check = _apply_merit(check_grid, dtype, ops)
-        return trial, _accepts(trial[0] if with_grad else trial, check, rtol)
+        return trial, _accepts(trial if with_grad is None else trial[0], check, rtol)
 
     def skip(ops):
         zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype),
@@ -726,17 +750,17 @@ def _tier_value(plan, dtype, operands):
     grid, shortcut = plan
     if shortcut is None:
         return _apply_merit(grid, dtype, operands)
-    trial, accepted = _shortcut_attempt(shortcut, dtype, operands, with_grad=False)
+    trial, accepted = _shortcut_attempt(shortcut, dtype, operands, with_grad=None)
     return jax.lax.cond(accepted, lambda ops: trial,
                         functools.partial(_apply_merit, grid, dtype), operands)
 
 
-def _tier_value_and_grad(plan, dtype, operands):
+def _tier_value_and_grad(plan, dtype, wrt, operands):
     grid, shortcut = plan
-    full = jax.value_and_grad(functools.partial(_apply_merit, grid, dtype))
+    full = _value_and_grad(functools.partial(_apply_merit, grid, dtype), wrt)
     if shortcut is None:
         return full(operands)
-    trial, accepted = _shortcut_attempt(shortcut, dtype, operands, with_grad=True)
+    trial, accepted = _shortcut_attempt(shortcut, dtype, operands, with_grad=wrt)
     return jax.lax.cond(accepted, lambda ops: trial, full, operands)
 
 
@@ -762,18 +786,30 @@ def _compiled_merit(grid, dtype, operands):
     return _apply_merit(grid.value, dtype, (aberrations.without_tilt(), *rest))
 
 
-@_switched_merit.defjvp
 def _switched_merit_jvp(static, primals, tangents):
     plans, dtype = static.value
     index, operands = primals
     _, d_operands = tangents
-    value, gradient = _dispatch(plans, dtype, with_grad=True)(index, operands)
+    # Only the operands that carry a tangent are differentiated: forward mode (``jvp``,
+    # ``jacfwd``) and un-jitted reverse mode would otherwise form the gradient in ``u``, the
+    # field and the spectra too (through every node's position), which only a jitted
+    # ``value_and_grad`` lets XLA drop.
+    d_leaves = jax.tree_util.tree_leaves(d_operands,
+                                         is_leaf=lambda x: isinstance(x, SymbolicZero))
+    wrt = tuple(not isinstance(t, SymbolicZero) for t in d_leaves)
+    if not any(wrt):
+        value = _dispatch(plans, dtype, with_grad=None)(index, operands)
+        return value, jnp.zeros_like(value)
+    value, gradient = _dispatch(plans, dtype, with_grad=wrt)(index, operands)
     # Operands wider than the computation (a float64 signal in a float32 merit) contribute
     # in their own dtype; the tangent takes the value's.
+    live = [t for t, w in zip(d_leaves, wrt, strict=True) if w]
     terms = [jnp.sum(g * t).astype(value.dtype)
-             for g, t in zip(jax.tree_util.tree_leaves(gradient),
-                             jax.tree_util.tree_leaves(d_operands), strict=True)]
+             for g, t in zip(gradient, live, strict=True)]
     return value, sum(terms, jnp.zeros_like(value))
+
+
+_switched_merit.defjvp(_switched_merit_jvp, symbolic_zeros=True)
 
 
 def jmse(
