@@ -489,7 +489,8 @@ def build_parser() -> argparse.ArgumentParser:
         "(field 0.95, u = 0.2 Nyquist/cutoff, waves). Times in ms, float64.")
     be.add_argument("--builtin", action="store_true", help="tiny built-in timing only")
     be.add_argument("--full", action="store_true", help="run_all.py without --quick")
-    be.add_argument("--repeats", type=int, default=5, help="timing repeats (--builtin)")
+    be.add_argument("--repeats", type=int, default=5,
+                    help="timed calls after the compiling one, fastest reported (--builtin)")
     be.add_argument("--out-json", metavar="FILE", help="write the timings (--builtin)")
     be.set_defaults(func=_cmd_bench)
 
