@@ -796,10 +796,8 @@ def _switched_merit_jvp(static, primals, tangents):
     # ``value_and_grad`` lets XLA drop.
     d_leaves = jax.tree_util.tree_leaves(d_operands,
                                          is_leaf=lambda x: isinstance(x, SymbolicZero))
+    # (JAX calls this rule only when some tangent is nonzero.)
     wrt = tuple(not isinstance(t, SymbolicZero) for t in d_leaves)
-    if not any(wrt):
-        value = _dispatch(plans, dtype, with_grad=None)(index, operands)
-        return value, jnp.zeros_like(value)
     value, gradient = _dispatch(plans, dtype, with_grad=wrt)(index, operands)
     # Operands wider than the computation (a float64 signal in a float32 merit) contribute
     # in their own dtype; the tangent takes the value's.
