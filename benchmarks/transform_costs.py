@@ -1,0 +1,119 @@
+"""What each way of calling the default merit costs: first call and warm call, with and
+without ``jit``, value, reverse mode and forward mode, at the paper's Fig. 1 point.
+
+Every mode runs in a fresh Python process (compiled programs persist within a process, and
+the persistent compilation cache is off), so "first call" includes tracing and compiling:
+
+- ``eager value``: ``jj.jmse(ab, ...)`` on concrete inputs, no ``jit``;
+- ``eager grad``: ``jax.grad(jj.jmse)(ab, ...)``, no ``jit``;
+- ``eager otf``: ``jj.otf`` at one frequency, no ``jit``;
+- ``jit value``, ``jit value_and_grad``, ``jit jvp`` (one tangent in every coefficient):
+  the first call is split into tracing (``lower``) and XLA compilation (``compile``).
+
+Warm times are the fastest of 11 calls after the first. Usage (from the repository root;
+~2 min on 2 cores)::
+
+    .venv/bin/python benchmarks/transform_costs.py
+
+Writes ``benchmarks/results/transform_costs.json`` and ``.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import _common as common
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+
+import jmse_jax as jj  # noqa: E402
+
+MODES = ("eager value", "eager grad", "eager otf", "jit value", "jit value_and_grad",
+         "jit jvp")
+WARM_CALLS = 11
+
+
+def _warm(fn, *args):
+    best = float("inf")
+    for _ in range(WARM_CALLS):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def _measure(mode: str) -> dict:
+    ab = jj.Seidel(**common.FIG1)
+    signal, noise = common.fig1_signal(), common.fig1_noise()
+
+    def merit(a):
+        return jj.jmse(a, common.FIG1_FIELD, common.FIG1_U, signal, noise)
+
+    if mode.startswith("eager"):
+        fn = {"eager value": merit, "eager grad": jax.grad(merit),
+              "eager otf": lambda a: jj.otf(a, 0.1, 0.05, common.FIG1_FIELD)}[mode]
+        start = time.perf_counter()
+        jax.block_until_ready(fn(ab))
+        return dict(first_s=time.perf_counter() - start, warm_s=_warm(fn, ab))
+    args = (ab,)
+    if mode == "jit value":
+        fn = jax.jit(merit)
+    elif mode == "jit value_and_grad":
+        fn = jax.jit(jax.value_and_grad(merit))
+    else:
+        fn = jax.jit(lambda a, t: jax.jvp(merit, (a,), (t,)))
+        args = (ab, jax.tree_util.tree_map(jnp.ones_like, ab))
+    start = time.perf_counter()
+    lowered = fn.lower(*args)
+    traced = time.perf_counter()
+    compiled = lowered.compile()
+    done = time.perf_counter()
+    jax.block_until_ready(compiled(*args))
+    return dict(trace_s=traced - start, compile_s=done - traced,
+                first_s=done - start, warm_s=_warm(compiled, *args))
+
+
+def main() -> None:
+    if len(sys.argv) == 3 and sys.argv[1] == "--child":
+        print(json.dumps(_measure(sys.argv[2])))
+        return
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+    report = dict(description=__doc__.split("\n\n")[0], machine=common.machine_info(),
+                  warm_calls=WARM_CALLS, modes={})
+    for mode in MODES:
+        out = subprocess.run([sys.executable, __file__, "--child", mode], env=env,
+                             capture_output=True, text=True, check=True).stdout
+        report["modes"][mode] = json.loads(out.strip().splitlines()[-1])
+        print(mode, report["modes"][mode], flush=True)
+    common.write_json(common.RESULTS / "transform_costs.json", report)
+
+    def fmt(row, key, scale=1.0, unit="s"):
+        return f"{row[key] * scale:.2f} {unit}" if key in row else "–"
+
+    machine = report["machine"]
+    lines = [
+        "# What each way of calling the default costs (Fig. 1 point)", "",
+        f"- machine: {machine['cpu_model']} ({machine['cpu_count']} CPUs), "
+        f"jax {machine['jax_version']}, {machine['dtype']}, commit {machine.get('commit')}",
+        f"- load at start: {machine['load_at_start']['uptime']}",
+        "- one fresh process per mode, no persistent compilation cache; warm = fastest of "
+        f"{WARM_CALLS} calls after the first", "",
+        "| mode | first call | of it: trace | of it: compile | warm call |",
+        "|---|---|---|---|---|",
+    ]
+    for mode, row in report["modes"].items():
+        lines.append(f"| {mode} | {fmt(row, 'first_s')} | {fmt(row, 'trace_s')} | "
+                     f"{fmt(row, 'compile_s')} | {fmt(row, 'warm_s', 1e3, 'ms')} |")
+    (common.RESULTS / "transform_costs.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
