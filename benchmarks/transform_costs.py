@@ -13,13 +13,16 @@ the persistent compilation cache is off), so "first call" includes tracing and c
 Warm times are the fastest of 11 calls after the first. Usage (from the repository root;
 ~2 min on 2 cores)::
 
-    .venv/bin/python benchmarks/transform_costs.py
+    .venv/bin/python benchmarks/transform_costs.py [--tag NAME]
 
-Writes ``benchmarks/results/transform_costs.json`` and ``.md``.
+Writes ``benchmarks/results/transform_costs[_NAME].json`` and ``.md``. To time an older
+commit, run it with ``PYTHONPATH`` set to a worktree of that commit and ``JMSE_COMMIT``
+naming it.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
@@ -84,6 +87,10 @@ def main() -> None:
     if len(sys.argv) == 3 and sys.argv[1] == "--child":
         print(json.dumps(_measure(sys.argv[2])))
         return
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tag", default="", help="suffix of the output file names")
+    tag = parser.parse_args().tag
+    name = "transform_costs" + (f"_{tag}" if tag else "")
     env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
     report = dict(description=__doc__.split("\n\n")[0], machine=common.machine_info(),
                   warm_calls=WARM_CALLS, modes={})
@@ -92,7 +99,7 @@ def main() -> None:
                              capture_output=True, text=True, check=True).stdout
         report["modes"][mode] = json.loads(out.strip().splitlines()[-1])
         print(mode, report["modes"][mode], flush=True)
-    common.write_json(common.RESULTS / "transform_costs.json", report)
+    common.write_json(common.RESULTS / f"{name}.json", report)
 
     def fmt(row, key, scale=1.0, unit="s"):
         return f"{row[key] * scale:.2f} {unit}" if key in row else "–"
@@ -111,7 +118,7 @@ def main() -> None:
     for mode, row in report["modes"].items():
         lines.append(f"| {mode} | {fmt(row, 'first_s')} | {fmt(row, 'trace_s')} | "
                      f"{fmt(row, 'compile_s')} | {fmt(row, 'warm_s', 1e3, 'ms')} |")
-    (common.RESULTS / "transform_costs.md").write_text("\n".join(lines) + "\n")
+    (common.RESULTS / f"{name}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 
