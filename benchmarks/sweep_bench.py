@@ -19,6 +19,7 @@ Usage (from the repository root)::
     python benchmarks/sweep_bench.py --preset fast --grid 10 --devices 1,2,4
     python benchmarks/sweep_bench.py --option nodes=[12,8] --option overlap_nodes=[24,24]
     python benchmarks/sweep_bench.py --preset fast --dtype float32 --tag fast_float32
+    python benchmarks/sweep_bench.py --preset fast --devices 1 --workers 1,2 --tag workers
 
 Writes ``benchmarks/results/sweep_bench.json`` and ``sweep_bench.md`` (``--tag`` adds a
 suffix to both names).
@@ -50,6 +51,9 @@ def _parse_args(argv=None):
     parser.add_argument("--modes", default="value,grad", help="value and/or grad")
     parser.add_argument("--batch-size", type=int, default=None,
                         help="designs per device per vmap (default: sweep's, 1 on CPU)")
+    parser.add_argument("--workers", default=None,
+                        help="host threads issuing calls, comma separated (default: sweep's, "
+                             "cores per device on CPU)")
     parser.add_argument("--repeats", type=int, default=1,
                         help="sweeps per configuration; the fastest run is reported")
     parser.add_argument("--timeout", type=float, default=1800.0,
@@ -105,16 +109,18 @@ def _worker(args) -> dict:
         singlet = lens.paper_singlet(design["stop_distance"], design["front_curvature"])
         return lens.lens_status(singlet).ok
 
+    workers = None if args.workers is None else int(args.workers)
     runs = []
     for _ in range(max(1, args.repeats)):
         result = jj.sweep(merit, designs, grad=args.mode == "grad", valid=physical,
-                          batch_size=args.batch_size, progress=False)
+                          batch_size=args.batch_size, workers=workers, progress=False)
         runs.append(result.metadata)
     best = min(runs, key=lambda m: m["run_s"])
     float64_difference = None
     if args.dtype != "float64" and jax.device_count() == 1:  # accuracy of the cheaper dtype
         reference = jj.sweep(merit, {k: v.astype(np.float64) for k, v in designs.items()},
-                             valid=physical, batch_size=args.batch_size, progress=False)
+                             valid=physical, batch_size=args.batch_size, workers=workers,
+                             progress=False)
         ok = result.ok & reference.ok
         float64_difference = float(np.max(np.abs(
             result.value[ok].astype(np.float64) / reference.value[ok] - 1.0)))
@@ -128,6 +134,7 @@ def _worker(args) -> dict:
         "n_designs": n,
         "padded_designs": best["padded_designs"],
         "batch_size": best["batch_size"],
+        "workers": best["workers"],
         "compile_s": [m["compile_s"] for m in runs],
         "run_s": [m["run_s"] for m in runs],
         "designs_per_second": n / best["run_s"],
@@ -141,7 +148,7 @@ def _worker(args) -> dict:
     }
 
 
-def _run_configuration(args, n_devices: int, mode: str) -> dict:
+def _run_configuration(args, n_devices: int, mode: str, workers: int | None) -> dict:
     env = dict(os.environ)
     flags = [f for f in env.get("XLA_FLAGS", "").split() if "device_count" not in f]
     if n_devices > 1:
@@ -152,6 +159,8 @@ def _run_configuration(args, n_devices: int, mode: str) -> dict:
                "--repeats", str(args.repeats), "--dtype", args.dtype]
     if args.batch_size is not None:
         command += ["--batch-size", str(args.batch_size)]
+    if workers is not None:
+        command += ["--workers", str(workers)]
     for item in args.option:
         command += ["--option", item]
     started = time.perf_counter()
@@ -159,9 +168,11 @@ def _run_configuration(args, n_devices: int, mode: str) -> dict:
         completed = subprocess.run(command, env=env, capture_output=True, text=True,
                                    timeout=args.timeout)
     except subprocess.TimeoutExpired:
-        return {"mode": mode, "n_devices": n_devices, "error": f"timeout after {args.timeout} s"}
+        return {"mode": mode, "n_devices": n_devices, "workers": workers,
+                "error": f"timeout after {args.timeout} s"}
     if completed.returncode != 0:
-        return {"mode": mode, "n_devices": n_devices, "error": completed.stderr[-2000:]}
+        return {"mode": mode, "n_devices": n_devices, "workers": workers,
+                "error": completed.stderr[-2000:]}
     row = json.loads(completed.stdout.strip().splitlines()[-1])
     row["process_wall_s"] = time.perf_counter() - started
     return row
@@ -194,18 +205,20 @@ def _markdown(report: dict) -> str:
                      "compute here.")
     lines += [
         "",
-        "| mode | devices | designs | designs/s | run s | compile s | XLA temp MB/design "
-        "| peak RSS MB | statuses |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| mode | devices | workers | designs | designs/s | run s | compile s "
+        "| XLA temp MB/design | peak RSS MB | statuses |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in report["rows"]:
         if "error" in row:
-            lines.append(f"| {row['mode']} | {row['n_devices']} | | failed: "
-                         f"{row['error'].splitlines()[-1] if row['error'] else ''} | | | | | |")
+            lines.append(f"| {row['mode']} | {row['n_devices']} | {row.get('workers') or ''} "
+                         f"| | failed: {row['error'].splitlines()[-1] if row['error'] else ''} "
+                         f"| | | | | |")
             continue
         per_design = row["xla_temp_bytes_per_design"]
         lines.append(
-            f"| {row['mode']} | {row['n_devices']} | {row['n_designs']} "
+            f"| {row['mode']} | {row['n_devices']} | {row.get('workers', '')} "
+            f"| {row['n_designs']} "
             f"| {row['designs_per_second']:.1f} | {min(row['run_s']):.2f} "
             f"| {min(row['compile_s']):.1f} "
             f"| {'' if per_design is None else f'{per_design / 1e6:.1f}'} "
@@ -219,7 +232,8 @@ def _markdown(report: dict) -> str:
     lines += ["", "`run s` excludes compilation (the executable is compiled ahead of time; "
               "`compile s` is that step). XLA temp MB/design is XLA's temporary-buffer size "
               "of the compiled sweep per device divided by `batch_size`: the memory to budget "
-              "per design in flight.", ""]
+              "per design in flight (times `workers` calls in flight). `workers`: host "
+              "threads issuing calls at the same time.", ""]
     return "\n".join(lines)
 
 
@@ -235,9 +249,11 @@ def main(argv=None) -> None:
     rows = []
     for mode in args.modes.split(","):
         for n_devices in (int(d) for d in args.devices.split(",")):
-            row = _run_configuration(args, n_devices, mode)
-            print(json.dumps(row), flush=True)
-            rows.append(row)
+            for workers in ([None] if args.workers is None
+                            else [int(w) for w in args.workers.split(",")]):
+                row = _run_configuration(args, n_devices, mode, workers)
+                print(json.dumps(row), flush=True)
+                rows.append(row)
     n_fields = len(args.fields.split(","))
     report = {
         "description": (

@@ -18,6 +18,7 @@ import subprocess
 import sys
 
 from ._reproduce import FIG1, FIG1_FIELD, FIG1_U
+from ._sweep import DEFAULT_ACCELERATOR_BATCH
 
 COEFFICIENTS = ("w020", "w040", "w131", "w222", "w220", "w311", "w111")
 COEFFICIENT_NAMES = {"w020": "defocus", "w040": "spherical", "w131": "coma",
@@ -288,6 +289,8 @@ def _cmd_sweep(args) -> int:
                          f"{args.max_designs}; lower N or raise --max-designs")
     if args.batch_size is not None and args.batch_size < 1:
         raise UsageError(f"--batch-size must be a positive integer, got {args.batch_size}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be a positive integer, got {args.workers}")
     cube = jj.hypercube(**axes)
     fixed = {k: getattr(args, k) for k in COEFFICIENTS}
     ab = jj.Seidel(**{k: cube.get(k, fixed[k]) for k in COEFFICIENTS})
@@ -298,7 +301,8 @@ def _cmd_sweep(args) -> int:
     print(f"sweep of {n} designs over {', '.join(f'{k} ({len(v)})' for k, v in axes.items())}; "
           f"preset {args.preset}, grad {args.grad}", flush=True)
     result = jj.sweep_jmse(ab, field, u, signal, noise, grad=args.grad, preset=args.preset,
-                           batch_size=args.batch_size, progress=not args.quiet,
+                           batch_size=args.batch_size, workers=args.workers,
+                           progress=not args.quiet,
                            metadata=dict(axes=axes, fixed=fixed, signal=args.signal,
                                          noise=args.noise, command="jmse-jax sweep"))
     path = result.save(os.path.join(args.out, "sweep.npz"))
@@ -474,7 +478,11 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--preset", choices=PRESET_NAMES, default="fast", help="jmse preset")
     sw.add_argument("--grad", action="store_true", help="also store the gradients")
     sw.add_argument("--batch-size", type=int, default=None,
-                    help="designs per vmap chunk (default: 1 on CPU, 16 on GPU/TPU)")
+                    help="designs per vmap chunk (default: 1 on CPU, "
+                         f"{DEFAULT_ACCELERATOR_BATCH} on GPU/TPU)")
+    sw.add_argument("--workers", type=int, default=None,
+                    help="host threads issuing calls at once (default: on CPU, cores per "
+                         "device)")
     sw.add_argument("--max-designs", type=int, default=10000, help="refuse larger grids")
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
     sw.add_argument("--out", default="jmse_output/sweep", help="output folder")

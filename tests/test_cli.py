@@ -66,6 +66,8 @@ def test_help_mentions_units(capsys, command, words):
     ("sweep", "--axis", "w020=0,1"),
     ("sweep", "--axis", "w020=0,1,2.5"),
     ("sweep", "--axis", "w020=-1,1,200", "--axis", "w222=-1,1,200"),
+    ("sweep", "--workers", "0"),
+    ("sweep", "--batch-size", "0"),
 ])
 def test_bad_arguments_exit_2_with_one_line(capsys, argv):
     status, out, err = run_cli(capsys, *argv)
@@ -147,11 +149,12 @@ def test_optimise_reduces_the_merit(capsys, tmp_path):
 
 def test_sweep_writes_npz_and_json(capsys, tmp_path):
     status, out, _ = run_cli(capsys, "sweep", "--axis", "w020=-1,1,3", "--axis",
-                             "field=0,1,2", "--w222", "0.5", "--quiet", "--out",
-                             str(tmp_path))
+                             "field=0,1,2", "--w222", "0.5", "--quiet", "--workers", "2",
+                             "--out", str(tmp_path))
     assert status == 0
     result = jj.SweepResult.load(tmp_path / "sweep.npz")
     assert result.n_designs == 6 and result.ok.all()
+    assert result.metadata["workers"] == 2
     assert (tmp_path / "sweep.json").is_file()
     summary = json.loads((tmp_path / "sweep_summary.json").read_text())
     assert summary["n_designs"] == 6

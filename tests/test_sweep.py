@@ -84,10 +84,11 @@ def test_statuses_of_a_generic_function():
     np.testing.assert_allclose(result.grad["y"][[0, 4]], [2.0, 3.0], rtol=1e-15)
 
 
-@pytest.mark.parametrize("n, batch_size, chunks_per_call, progress", [
-    (1, 1, 1, False), (7, 3, 1, False), (7, 2, 1, True), (40, 3, 4, True), (40, 64, 2, False),
+@pytest.mark.parametrize("n, batch_size, chunks_per_call, progress, workers", [
+    (1, 1, 1, False, 1), (7, 3, 1, False, 1), (7, 2, 1, True, 1), (40, 3, 4, True, 1),
+    (40, 64, 2, False, 1), (7, 1, 1, True, 3), (40, 3, 2, False, 4), (1, 1, 1, False, 2),
 ])
-def test_padding_and_order(n, batch_size, chunks_per_call, progress):
+def test_padding_and_order(n, batch_size, chunks_per_call, progress, workers):
     index = np.arange(n, dtype=np.float64)
     batch = {"index": index, "pair": np.stack([index, -index], axis=1)}
 
@@ -95,7 +96,7 @@ def test_padding_and_order(n, batch_size, chunks_per_call, progress):
         return {"sum": d["pair"][0] - 2.0 * d["pair"][1], "copy": d["index"]}
 
     result = jj.sweep(fn, batch, batch_size=batch_size, chunks_per_call=chunks_per_call,
-                      progress=progress)
+                      workers=workers, progress=progress)
     np.testing.assert_array_equal(result.value["sum"], 3.0 * index)
     np.testing.assert_array_equal(result.value["copy"], index)
     np.testing.assert_array_equal(result.status, np.zeros(n))
@@ -104,6 +105,37 @@ def test_padding_and_order(n, batch_size, chunks_per_call, progress):
     calls = -(-n // call_size)
     assert result.metadata["calls"] == calls
     assert result.metadata["padded_designs"] == calls * call_size
+    assert result.metadata["workers"] == workers
+
+
+def test_workers_do_not_change_the_results():
+    """Calls issued from several host threads run the same compiled program: bit for bit
+    the one-thread sweep, in input order, with gradients."""
+    aberrations, field = designs()
+    n = field.shape[0]
+    u = np.linspace(0.15, 0.3, n)
+    results = [jj.sweep_jmse(aberrations, field, u, SIGNAL, NOISE, grad=True, workers=w,
+                             batch_size=1, progress=w == 3, **CHEAP) for w in (1, 3)]
+    one, three = results
+    assert (one.metadata["workers"], three.metadata["workers"]) == (1, 3)
+    assert three.metadata["calls"] == n
+    np.testing.assert_array_equal(one.status, three.status)
+    np.testing.assert_array_equal(one.value, three.value)
+    leaves = jax.tree_util.tree_leaves
+    for a, b in zip(leaves(one.grad), leaves(three.grad), strict=True):
+        np.testing.assert_array_equal(a, b)
+    i = 5  # an OK design: the threaded sweep's entry equals the one-design loop (the oracle)
+    value, (d_ab, _, d_u) = _loop_jmse(aberrations, field, u, i)
+    np.testing.assert_allclose(three.value[i], value, rtol=1e-12)
+    np.testing.assert_allclose(three.grad["u"][i], d_u, rtol=1e-9)
+    np.testing.assert_allclose(three.grad["aberrations"].w020[i], d_ab.w020, rtol=1e-9)
+
+
+def test_default_workers_on_cpu():
+    """On one CPU host the default issues calls from one thread per core and device."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    result = jj.sweep(_toy, {"x": np.ones(5), "y": np.ones(5)}, progress=False)
+    assert result.metadata["workers"] == max(1, cores // jax.device_count())
 
 
 def test_has_aux_and_integer_leaves():
@@ -161,6 +193,8 @@ def test_hypercube_order():
     (dict(batch_size=0), "batch_size must be an integer >= 1, got 0"),
     (dict(batch_size=2.5), "batch_size must be an integer >= 1"),
     (dict(chunks_per_call=0), "chunks_per_call must be an integer >= 1, got 0"),
+    (dict(workers=0), "workers must be an integer >= 1, got 0"),
+    (dict(workers=1.5), "workers must be an integer >= 1"),
     (dict(devices=0), r"devices must be in \[1, \d+\]"),
     (dict(devices=[]), "devices must be None"),
 ])
