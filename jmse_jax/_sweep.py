@@ -602,16 +602,19 @@ def sweep(
             pending = result
         outputs.append(_to_host(pending))
     else:
-        with ThreadPoolExecutor(max_workers=min(workers, n_calls)) as pool:
-            futures = [pool.submit(lambda c: _to_host(compiled(consts, block_of(c))), call)
-                       for call in range(n_calls)]
+        pool = ThreadPoolExecutor(max_workers=min(workers, n_calls))
+        futures = [pool.submit(lambda c: _to_host(compiled(consts, block_of(c))), call)
+                   for call in range(n_calls)]
+        try:
             finished = 0
             for future in as_completed(futures):
                 future.result()  # an error in a call stops the sweep here
                 finished += 1
                 if bar is not None:
                     bar.update(min(finished * call_size, n) - bar.n)
-            outputs = [future.result() for future in futures]
+        finally:  # on an error or Ctrl-C, drop the calls not yet started
+            pool.shutdown(wait=True, cancel_futures=True)
+        outputs = [future.result() for future in futures]
     if bar is not None:
         bar.update(n - bar.n)
         bar.close()

@@ -131,6 +131,26 @@ def test_workers_do_not_change_the_results():
     np.testing.assert_allclose(three.grad["aberrations"].w020[i], d_ab.w020, rtol=1e-9)
 
 
+def test_an_error_in_a_threaded_call_stops_the_sweep():
+    """An error raised while a call runs reaches the caller, and calls not yet started are
+    dropped rather than run to the end of the sweep."""
+    seen = []
+
+    def host(x):
+        seen.append(float(x))
+        if x == 3.0:
+            raise RuntimeError("design 3 failed")
+        return np.asarray(2.0 * x)
+
+    def fn(design):
+        return jax.pure_callback(host, jax.ShapeDtypeStruct((), jnp.float64), design["x"])
+
+    n = 200
+    with pytest.raises(Exception, match="design 3 failed"):
+        jj.sweep(fn, {"x": np.arange(n, dtype=np.float64)}, workers=2, progress=False)
+    assert 3.0 in seen and len(seen) < n
+
+
 def test_default_workers_on_cpu():
     """On one CPU host the default issues calls from one thread per core and device."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
