@@ -144,15 +144,17 @@ plt.xlabel("field"); plt.ylabel("JMSE"); plt.legend(); plt.show()"""),
         ("md", """\
 # Sweeping the JMSE over an aberration hypercube
 
-`hypercube` builds every combination of the axes; `sweep_jmse` evaluates them with `vmap` in
-chunks (sharded over devices when there are several). Coefficients in waves."""),
+`hypercube` builds every combination of the axes; `sweep_jmse` evaluates them one design at
+a time on a CPU, from one host thread per core (`workers`), and with `vmap` in chunks of
+`batch_size` on a GPU; with several devices the designs are sharded over them. Coefficients
+in waves."""),
         ("code", SETUP),
         ("code", """\
 cube = jj.hypercube(w020=np.linspace(-3, 3, 5), w222=np.linspace(-1.5, 1.5, 3))
 ab = jj.Seidel(w020=cube["w020"], w222=cube["w222"], w040=0.5)
 result = jj.sweep_jmse(ab, 0.95, 0.2, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3),
-                       preset="fast", batch_size=8, progress=False)
-result, result.status_counts()"""),
+                       preset="fast", progress=False)
+result, result.status_counts(), result.metadata["workers"]"""),
         ("code", """\
 grid = np.asarray(result.value).reshape(5, 3)
 plt.imshow(np.log10(grid).T, origin="lower", aspect="auto", extent=(-3, 3, -1.5, 1.5))
