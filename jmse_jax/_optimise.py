@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._merit import jmse
+from ._merit import jmse, jmse_options as _full_jmse_options
 from ._numerics import check_choice, check_count, check_range, is_concrete
 from ._spectra import AbstractNoise, AbstractSignal, MarkovSignal, WhiteNoise
 from .lens import (
@@ -195,6 +195,11 @@ def _merit_table(lens, merit, u, signal, noise, fields, wavelengths, reference_s
     if own_reference:
         reference_scale = lens.wavelength * _f_number_of(reference)
     u = jnp.asarray(u, dtype)
+    # The default's tiers pick a grid per field. One field at a time (lax.map), each field
+    # runs only its own grid; under vmap every grid that any field picks runs for all of
+    # them (the paper singlet's value_and_grad at 3 fields: 16 against 24-40 ms). A fixed
+    # grid is cheaper vectorised over a few fields (fast: 17 against 22 ms).
+    tiered = _full_jmse_options(**jmse_options)["tiers"] is not None
 
     rows = []
     for wl in wavelengths:
@@ -218,7 +223,10 @@ def _merit_table(lens, merit, u, signal, noise, fields, wavelengths, reference_s
         def one_field(h, ab=aberrations, band=band, spectra=spectra):
             return jmse(ab, h, band, *spectra, **jmse_options)
 
-        rows.append(jax.vmap(one_field)(fields))
+        if tiered:
+            rows.append(jax.lax.map(one_field, fields))
+        else:
+            rows.append(jax.vmap(one_field)(fields))
     return jnp.stack(rows), ok
 
 

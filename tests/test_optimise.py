@@ -107,6 +107,30 @@ def test_bounds_use_lbfgsb_and_find_the_constrained_optimum(rms_optimum):
     assert bounded.rms_wavefront > rms_optimum.rms_wavefront
 
 
+def test_default_preset_merit_is_the_field_mean_of_jmse():
+    """With the default's tiers the fields go one at a time (each runs its own grid): value
+    and gradient equal the mean over the fields of ``jmse`` and of its gradient, taken field
+    by field through the lens's Seidel sums (an on-axis, a middle-tier and an outer field)."""
+    fields = (0.0, 0.7, 1.0)
+    signal, noise = jmse_jax.MarkovSignal(1.0, 5.0), jmse_jax.WhiteNoise(1e-3)
+
+    def lens_at(shift):
+        return jl.Singlet(0.04, -0.17, 1.5, 1.5168, stop_distance=1.0, f_number=4.6,
+                          field_angle=10.0, image_shift=shift)
+
+    shift = jnp.asarray(-0.1)
+    value, grad = jax.jit(jax.value_and_grad(
+        lambda s: lens_merit(lens_at(s), fields=fields)))(shift)
+
+    def one_field(s, f):
+        return jmse_jax.jmse(jl.seidel_waves(lens_at(s)), f, 0.2, signal, noise)
+
+    per_field = [jax.value_and_grad(one_field)(shift, f) for f in fields]
+    assert float(value) == pytest.approx(np.mean([float(v) for v, _ in per_field]), rel=1e-12)
+    assert float(grad) == pytest.approx(np.mean([float(g) for _, g in per_field]), rel=1e-9)
+    assert abs(float(grad)) > 1e-6
+
+
 def test_polychromatic_merit_rescales_band_and_spectra():
     """Constant index: at lambda the merit is the JMSE with u s, mu / s, S_n / s² (s = l/l0)."""
     lens = jl.Singlet(0.04, -0.17, 1.5, 1.5168, stop_distance=1.0, f_number=4.6,
