@@ -443,11 +443,11 @@ def sweep(
     workers : int >= 1, optional
         Host threads that issue calls at the same time. On a CPU, calls issued from one
         thread run one after the other and XLA spreads each over the cores only partly;
-        calls issued from several threads run side by side. Default: on CPU in a single process,
-        the cores available to the process divided by the number of devices (at least 1);
-        otherwise 1 (a GPU runs its calls in order anyway). Every call runs the same
-        compiled program, so the results do not depend on ``workers``; the memory in flight
-        is ``workers`` times one call's.
+        calls issued from several threads run side by side. Default: on a CPU in a single
+        process, the cores available to the process divided by the number of devices (at
+        least 1); otherwise 1 (a GPU runs its calls in order anyway). Every call runs the
+        same compiled program, so the results do not depend on ``workers``; the memory in
+        flight is ``workers`` times one call's.
     progress : bool, optional
         Show a tqdm progress bar, updated after each call. Default: on when stderr is a
         terminal and the sweep takes more than one call.
