@@ -124,7 +124,7 @@ _PRESET_ONLY = ("tiers", "radial")
 #: off too.
 PRESETS: dict[str, dict] = {
     "fast": dict(
-        quadrature="polar", nodes=(24, 16), se_nodes=(400, 240), otf_method="overlap",
+        quadrature="polar", nodes=(24, 16), se_nodes=(400, 120), otf_method="overlap",
         overlap_nodes=(28, 28), tiers=None, radial=True,
     ),
     "default": dict(
