@@ -53,15 +53,17 @@ CANDIDATES = {
     "k": dict(nodes=(32, 16), se_nodes=(2400, 128), overlap_nodes=(26, 26)),
     "l": dict(nodes=(36, 18), se_nodes=(1800, 128), overlap_nodes=(24, 24)),
     "old_t2": dict(nodes=(80, 32), se_nodes=(1600, 384), overlap_nodes=(56, 56)),
-    "t2se = tier 3": dict(nodes=(80, 32), se_nodes=(2400, 384), overlap_nodes=(56, 56)),
+    "t2se": dict(nodes=(80, 32), se_nodes=(2400, 384), overlap_nodes=(56, 56)),
+    "t3 = tier 3": dict(nodes=(80, 32), se_nodes=(2400, 256), overlap_nodes=(56, 56)),
     "h2": dict(nodes=(64, 28), se_nodes=(2400, 256), overlap_nodes=(48, 48)),
-    "m = tier 2": dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40)),
+    "m": dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40)),
+    "m2 = tier 2": dict(nodes=(56, 28), se_nodes=(2400, 128), overlap_nodes=(40, 40)),
     "shortcut check": dict(jj.DEFAULT_TIERS[1][3].check),
 }
-_STRONG = ("old_t2", "t2se = tier 3", "h2", "m = tier 2")
+_STRONG = ("old_t2", "t2se", "t3 = tier 3", "h2", "m", "m2 = tier 2")
 #: The candidates that are the default's present grids (``--current``), and the default
 #: itself as a user gets it (its tier chosen by the design, its shortcut applied).
-CURRENT = ("old_t0 = tier 0", "a2 = tier 1", "m = tier 2", "t2se = tier 3", "shortcut check",
+CURRENT = ("old_t0 = tier 0", "a2 = tier 1", "m2 = tier 2", "t3 = tier 3", "shortcut check",
            "default")
 #: Values ``u`` is drawn from (``--u`` replaces them).
 U_VALUES = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)

@@ -95,16 +95,19 @@ _REACHES_CUTOFF_U = 1.0 / math.sqrt(2.0)
 #: in that tier it kept 119 (55 %), with a worst error of 4.3e-6 among them; it is skipped
 #: for ``u > 1/sqrt(2)`` (``_REACHES_CUTOFF_U``), where the third tier is skipped too. With
 #: those bounds, 406 random designs with u in 0.75-0.95 (``calibrate_tiers.py --u ...``)
-#: give a worst error of 3e-5 up to strength 15 and 8e-5 in 15-25 (the fourth tier).
+#: give a worst error of 3e-5 up to strength 15 and 8e-5 in 15-25 (the fourth tier). The
+#: fine angular counts of the third and fourth tiers were then lowered (256 -> 128 and
+#: 384 -> 256) where the stored references of both calibrations show no loss: the largest
+#: change in a design's error 2e-11 and 2e-8 (``benchmarks/recheck_tiers.py``).
 DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
     (1.0, 0.5, _TIER0_GRID, None),
     (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 28)),
      TierShortcut(trial=_TIER0_GRID,
                   check=dict(nodes=(20, 8), se_nodes=(200, 32), overlap_nodes=(16, 16)),
                   rtol=1e-5, u_max=_REACHES_CUTOFF_U)),
-    (15.0, _REACHES_CUTOFF_U, dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40)),
+    (15.0, _REACHES_CUTOFF_U, dict(nodes=(56, 28), se_nodes=(2400, 128), overlap_nodes=(40, 40)),
      None),
-    (math.inf, math.inf, dict(nodes=(80, 32), se_nodes=(2400, 384), overlap_nodes=(56, 56)),
+    (math.inf, math.inf, dict(nodes=(80, 32), se_nodes=(2400, 256), overlap_nodes=(56, 56)),
      None),
 )
 

@@ -1,0 +1,129 @@
+"""Re-check the default's tier grids against the references stored by ``calibrate_tiers.py``.
+
+The calibration's cost is its references (one converged grid per design, ~14 min for 426
+designs). Once stored (``results/calibrate_tiers.json`` and ``calibrate_tiers_kink.json``),
+another candidate grid for a tier is checked in seconds: this script evaluates, for every
+tier of ``DEFAULT_TIERS``, the present grid and variants of its fine angular S_e count on the
+stored designs that the tier serves, and reports the worst, 90th-percentile and median
+relative error and the largest change in any design's error against the present grid.
+
+Usage (from the repository root; ~2 min on 2 cores)::
+
+    .venv/bin/python benchmarks/recheck_tiers.py [--angular 1:96,64 2:256 3:384,192]
+
+``--angular TIER:A,B,...`` lists the fine angular counts tried for a tier (default: the
+values of the 2026-11-24 check, which lowered tier 2 from 256 to 128 and tier 3 from 384 to
+256). Writes ``results/recheck_tiers.json`` and ``.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import _common as common  # noqa: E402 - turns on float64
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+import jmse_jax as jj  # noqa: E402
+
+SOURCES = ("calibrate_tiers", "calibrate_tiers_kink")
+#: Fine angular counts tried by default, per tier index.
+DEFAULT_ANGULAR = {1: (96,), 2: (256, 96), 3: (384, 192)}
+
+
+def _tier_index(strength: float, u: float) -> int:
+    """The tier ``DEFAULT_TIERS`` gives a design (the bounds, in order)."""
+    for index, (bound, u_bound, *_rest) in enumerate(jj.DEFAULT_TIERS[:-1]):
+        if strength <= bound and u <= u_bound:
+            return index
+    return len(jj.DEFAULT_TIERS) - 1
+
+
+def _designs() -> list[dict]:
+    designs = []
+    for name in SOURCES:
+        for design in json.loads((common.RESULTS / f"{name}.json").read_text())["designs"]:
+            if design.get("reference") is not None:
+                designs.append(dict(design, source=name))
+    return designs
+
+
+def _errors(grid: dict, designs: list[dict]) -> np.ndarray:
+    merit = jax.jit(lambda ab, f, u, s, n: jj.jmse(ab, f, u, s, n, **grid))
+    errors = []
+    for d in designs:
+        value = float(merit(jj.Seidel(**d["coefficients"]), d["field"], d["u"],
+                            jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(d["noise"])))
+        errors.append(abs(value / d["reference"] - 1.0))
+    return np.asarray(errors)
+
+
+def _parse_angular(items) -> dict[int, tuple[int, ...]]:
+    if not items:
+        return dict(DEFAULT_ANGULAR)
+    out = {}
+    for item in items:
+        tier, _, counts = item.partition(":")
+        out[int(tier)] = tuple(int(c) for c in counts.split(","))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--angular", nargs="*", help="TIER:A,B,... fine angular counts to try")
+    args = parser.parse_args()
+    angular = _parse_angular(args.angular)
+    designs = _designs()
+    report = dict(description=__doc__.split("\n\n")[0], machine=common.machine_info(),
+                  sources=list(SOURCES), tiers=[])
+    lines = ["# Tier grids re-checked against the stored calibration references", "",
+             f"{len(designs)} designs with references from "
+             f"{', '.join(f'`results/{s}.json`' for s in SOURCES)}; commit "
+             f"{report['machine'].get('commit')}.", "",
+             "| tier | designs | grid | worst | p90 | median | largest change vs present |",
+             "|---|---|---|---|---|---|---|"]
+    for index, (*_bounds, grid, _shortcut) in enumerate(jj.DEFAULT_TIERS):
+        served = [d for d in designs if _tier_index(d["strength"], d["u"]) == index]
+        if not served:
+            continue
+        present = _errors(grid, served)
+        variants = [(grid["se_nodes"][1], present)]
+        for count in angular.get(index, ()):
+            if count == grid["se_nodes"][1]:
+                continue
+            variant = dict(grid, se_nodes=(grid["se_nodes"][0], count))
+            variants.append((count, _errors(variant, served)))
+        entry = dict(tier=index, designs=len(served), grid=grid, variants=[])
+        for count, errors in variants:
+            change = errors - present
+            worst_change = int(np.argmax(change))
+            row = dict(angular=count, worst=float(errors.max()),
+                       p90=float(np.percentile(errors, 90)), median=float(np.median(errors)),
+                       largest_change=float(change[worst_change]),
+                       at=dict(u=served[worst_change]["u"],
+                               noise=served[worst_change]["noise"],
+                               strength=served[worst_change]["strength"]))
+            entry["variants"].append(row)
+            label = (f"nodes {tuple(grid['nodes'])}, se ({grid['se_nodes'][0]}, {count}), "
+                     f"overlap {tuple(grid['overlap_nodes'])}"
+                     + (" (present)" if count == grid["se_nodes"][1] else ""))
+            change_text = ("–" if count == grid["se_nodes"][1] else
+                           f"{row['largest_change']:+.1e} (u {row['at']['u']}, "
+                           f"K {row['at']['strength']:.1f})")
+            lines.append(f"| {index} | {len(served)} | {label} | {row['worst']:.2e} | "
+                         f"{row['p90']:.2e} | {row['median']:.2e} | {change_text} |")
+            print(lines[-1], flush=True)
+        report["tiers"].append(entry)
+    report["machine"]["load_at_end"] = common.load_average()
+    common.write_json(common.RESULTS / "recheck_tiers.json", report)
+    (common.RESULTS / "recheck_tiers.md").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
