@@ -13,7 +13,14 @@ Usage (from the repository root; ~2 min on 2 cores)::
 
 ``--angular TIER:A,B,...`` lists the fine angular counts tried for a tier (default: the
 values of the 2026-11-24 check, which lowered tier 2 from 256 to 128 and tier 3 from 384 to
-256). Writes ``results/recheck_tiers.json`` and ``.md``.
+256). Tier 0's grid is also tier 1's trial: a change to it is checked on tier 1's designs
+through the default as a whole as well (``jmse`` with the changed tiers in ``PRESETS``).
+
+The stored designs are not the whole story: tier 0 at 48 angular nodes passed here (largest
+change 1.5e-10) but moved the bank case ``fig1_defocus_m6_u_0.1_noise_1e-4`` from 6.9e-6 to
+1.8e-4 (its trial and the shortcut's check agreed while both were off), so it was not
+adopted. Check the bank too (``accuracy_speed.py`` or the tests) before changing a tier.
+Writes ``results/recheck_tiers.json`` and ``.md``.
 """
 
 from __future__ import annotations
@@ -34,7 +41,7 @@ import jmse_jax as jj  # noqa: E402
 
 SOURCES = ("calibrate_tiers", "calibrate_tiers_kink")
 #: Fine angular counts tried by default, per tier index.
-DEFAULT_ANGULAR = {1: (96,), 2: (256, 96), 3: (384, 192)}
+DEFAULT_ANGULAR = {0: (48,), 1: (96,), 2: (256, 96), 3: (384, 192)}
 
 
 def _tier_index(strength: float, u: float) -> int:
@@ -64,6 +71,46 @@ def _errors(grid: dict, designs: list[dict]) -> np.ndarray:
     return np.asarray(errors)
 
 
+def _tiers_with_tier0(grid: dict) -> tuple:
+    """``DEFAULT_TIERS`` with tier 0's grid, and tier 1's trial, replaced by ``grid``."""
+    tiers = list(jj.DEFAULT_TIERS)
+    tiers[0] = (*tiers[0][:2], grid, tiers[0][3])
+    bound, u_bound, own, shortcut = tiers[1]
+    tiers[1] = (bound, u_bound, own, shortcut._replace(trial=grid))
+    return tuple(tiers)
+
+
+def _recheck_trial(designs, grid, counts, lines) -> list[dict]:
+    """The default as a user gets it (shortcut included) on the designs of strength <= 5,
+    with tier 0's fine angular count at the present value and at each of ``counts``."""
+    served = [d for d in designs if d["strength"] <= jj.DEFAULT_TIERS[1][0]]
+    lines += ["", f"The default as a whole on the {len(served)} designs of strength <= "
+              f"{jj.DEFAULT_TIERS[1][0]:g} (tier 0's grid is tier 1's trial):", "",
+              "| tier 0 angular | worst | p90 | median | largest change vs present |",
+              "|---|---|---|---|---|"]
+    presets = jj.PRESETS["default"]
+    original = presets["tiers"]
+    rows, present = [], None
+    try:
+        for count in (grid["se_nodes"][1], *counts):
+            presets["tiers"] = _tiers_with_tier0(dict(grid, se_nodes=(grid["se_nodes"][0],
+                                                                     count)))
+            errors = _errors({}, served)
+            present = errors if present is None else present
+            change = errors - present
+            rows.append(dict(angular=count, worst=float(errors.max()),
+                             p90=float(np.percentile(errors, 90)),
+                             median=float(np.median(errors)),
+                             largest_change=float(change.max())))
+            lines.append(f"| {count} | {errors.max():.2e} | {np.percentile(errors, 90):.2e} | "
+                         f"{np.median(errors):.2e} | "
+                         f"{'–' if len(rows) == 1 else f'{change.max():+.1e}'} |")
+            print(lines[-1], flush=True)
+    finally:
+        presets["tiers"] = original
+    return rows
+
+
 def _parse_angular(items) -> dict[int, tuple[int, ...]]:
     if not items:
         return dict(DEFAULT_ANGULAR)
@@ -88,6 +135,7 @@ def main() -> None:
              f"{report['machine'].get('commit')}.", "",
              "| tier | designs | grid | worst | p90 | median | largest change vs present |",
              "|---|---|---|---|---|---|---|"]
+    trial_lines: list[str] = []
     for index, (*_bounds, grid, _shortcut) in enumerate(jj.DEFAULT_TIERS):
         served = [d for d in designs if _tier_index(d["strength"], d["u"]) == index]
         if not served:
@@ -120,6 +168,9 @@ def main() -> None:
                          f"{row['p90']:.2e} | {row['median']:.2e} | {change_text} |")
             print(lines[-1], flush=True)
         report["tiers"].append(entry)
+        if index == 0:  # tier 0's grid is also tier 1's trial: the default as a whole
+            report["trial"] = _recheck_trial(designs, grid, angular.get(0, ()), trial_lines)
+    lines += trial_lines
     report["machine"]["load_at_end"] = common.load_average()
     common.write_json(common.RESULTS / "recheck_tiers.json", report)
     (common.RESULTS / "recheck_tiers.md").write_text("\n".join(lines) + "\n")
