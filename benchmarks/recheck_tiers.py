@@ -38,18 +38,11 @@ import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
+from jmse_jax._merit import _tier_index  # noqa: E402
 
 SOURCES = ("calibrate_tiers", "calibrate_tiers_kink")
 #: Fine angular counts tried by default, per tier index.
 DEFAULT_ANGULAR = {0: (48,), 1: (96,), 2: (256, 96), 3: (384, 192)}
-
-
-def _tier_index(strength: float, u: float) -> int:
-    """The tier ``DEFAULT_TIERS`` gives a design (the bounds, in order)."""
-    for index, (bound, u_bound, *_rest) in enumerate(jj.DEFAULT_TIERS[:-1]):
-        if strength <= bound and u <= u_bound:
-            return index
-    return len(jj.DEFAULT_TIERS) - 1
 
 
 def _designs() -> list[dict]:
@@ -137,7 +130,8 @@ def main() -> None:
              "|---|---|---|---|---|---|---|"]
     trial_lines: list[str] = []
     for index, (*_bounds, grid, _shortcut) in enumerate(jj.DEFAULT_TIERS):
-        served = [d for d in designs if _tier_index(d["strength"], d["u"]) == index]
+        served = [d for d in designs
+                  if int(_tier_index(d["strength"], d["u"], jj.DEFAULT_TIERS)) == index]
         if not served:
             continue
         present = _errors(grid, served)
