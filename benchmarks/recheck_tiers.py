@@ -3,18 +3,23 @@
 The calibration's cost is its references (one converged grid per design, ~14 min for 426
 designs). Once stored (``results/calibrate_tiers.json`` and ``calibrate_tiers_kink.json``),
 another candidate grid for a tier is checked in seconds: this script evaluates, for every
-tier of ``DEFAULT_TIERS``, the present grid and variants of its fine angular S_e count on the
-stored designs that the tier serves, and reports the worst, 90th-percentile and median
-relative error and the largest change in any design's error against the present grid.
+tier of ``DEFAULT_TIERS``, the present grid and variants of its fine angular S_e count and
+of its overlap order along the chords on the stored designs that the tier serves, and
+reports the worst, 90th-percentile and median relative error and the largest change in any
+design's error against the present grid.
 
-Usage (from the repository root; ~2 min on 2 cores)::
+Usage (from the repository root; ~4 min on 2 cores)::
 
     .venv/bin/python benchmarks/recheck_tiers.py [--angular 1:96,64 2:256 3:384,192]
+                                                 [--along 1:28,20 2:40 3:56]
 
-``--angular TIER:A,B,...`` lists the fine angular counts tried for a tier (default: the
-values of the 2026-11-24 check, which lowered tier 2 from 256 to 128 and tier 3 from 384 to
-256). Tier 0's grid is also tier 1's trial: a change to it is checked on tier 1's designs
-through the default as a whole as well (``jmse`` with the changed tiers in ``PRESETS``).
+``--angular TIER:A,B,...`` lists the fine angular counts tried for a tier and ``--along
+TIER:A,B,...`` the overlap rule's orders along the chords (the second entry of
+``overlap_nodes``). The defaults are the values of the 2026-11-24 checks, which lowered the
+angular count of tier 2 from 256 to 128 and of tier 3 from 384 to 256, and the order along
+the chords of tiers 1, 2 and 3 from 28, 40 and 56 to 24, 24 and 32. Tier 0's grid is also
+tier 1's trial: a change to its angular count is checked on tier 1's designs through the
+default as a whole as well (``jmse`` with the changed tiers in ``PRESETS``).
 
 The stored designs are not the whole story: tier 0 at 48 angular nodes passed here (largest
 change 1.5e-10) but moved the bank case ``fig1_defocus_m6_u_0.1_noise_1e-4`` from 6.9e-6 to
@@ -43,6 +48,8 @@ from jmse_jax._merit import _tier_index  # noqa: E402
 SOURCES = ("calibrate_tiers", "calibrate_tiers_kink")
 #: Fine angular counts tried by default, per tier index.
 DEFAULT_ANGULAR = {0: (48,), 1: (96,), 2: (256, 96), 3: (384, 192)}
+#: Orders along the chords tried by default, per tier index (the former values and one below).
+DEFAULT_ALONG = {1: (28, 20), 2: (40,), 3: (56,)}
 
 
 def _designs() -> list[dict]:
@@ -104,9 +111,9 @@ def _recheck_trial(designs, grid, counts, lines) -> list[dict]:
     return rows
 
 
-def _parse_angular(items) -> dict[int, tuple[int, ...]]:
+def _parse_counts(items, default) -> dict[int, tuple[int, ...]]:
     if not items:
-        return dict(DEFAULT_ANGULAR)
+        return dict(default)
     out = {}
     for item in items:
         tier, _, counts = item.partition(":")
@@ -117,8 +124,11 @@ def _parse_angular(items) -> dict[int, tuple[int, ...]]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--angular", nargs="*", help="TIER:A,B,... fine angular counts to try")
+    parser.add_argument("--along", nargs="*",
+                        help="TIER:A,B,... overlap orders along the chords to try")
     args = parser.parse_args()
-    angular = _parse_angular(args.angular)
+    angular = _parse_counts(args.angular, DEFAULT_ANGULAR)
+    along = _parse_counts(args.along, DEFAULT_ALONG)
     designs = _designs()
     report = dict(description=__doc__.split("\n\n")[0], machine=common.machine_info(),
                   sources=list(SOURCES), tiers=[])
@@ -135,27 +145,32 @@ def main() -> None:
         if not served:
             continue
         present = _errors(grid, served)
-        variants = [(grid["se_nodes"][1], present)]
+        variants = [(grid, present)]
         for count in angular.get(index, ()):
-            if count == grid["se_nodes"][1]:
-                continue
-            variant = dict(grid, se_nodes=(grid["se_nodes"][0], count))
-            variants.append((count, _errors(variant, served)))
+            if count != grid["se_nodes"][1]:
+                variant = dict(grid, se_nodes=(grid["se_nodes"][0], count))
+                variants.append((variant, _errors(variant, served)))
+        for order in along.get(index, ()):
+            if order != grid["overlap_nodes"][1]:
+                variant = dict(grid, overlap_nodes=(grid["overlap_nodes"][0], order))
+                variants.append((variant, _errors(variant, served)))
         entry = dict(tier=index, designs=len(served), grid=grid, variants=[])
-        for count, errors in variants:
+        for variant, errors in variants:
+            is_present = variant is grid
             change = errors - present
             worst_change = int(np.argmax(change))
-            row = dict(angular=count, worst=float(errors.max()),
+            row = dict(angular=variant["se_nodes"][1], along=variant["overlap_nodes"][1],
+                       worst=float(errors.max()),
                        p90=float(np.percentile(errors, 90)), median=float(np.median(errors)),
                        largest_change=float(change[worst_change]),
                        at=dict(u=served[worst_change]["u"],
                                noise=served[worst_change]["noise"],
                                strength=served[worst_change]["strength"]))
             entry["variants"].append(row)
-            label = (f"nodes {tuple(grid['nodes'])}, se ({grid['se_nodes'][0]}, {count}), "
-                     f"overlap {tuple(grid['overlap_nodes'])}"
-                     + (" (present)" if count == grid["se_nodes"][1] else ""))
-            change_text = ("–" if count == grid["se_nodes"][1] else
+            label = (f"nodes {tuple(variant['nodes'])}, se {tuple(variant['se_nodes'])}, "
+                     f"overlap {tuple(variant['overlap_nodes'])}"
+                     + (" (present)" if is_present else ""))
+            change_text = ("–" if is_present else
                            f"{row['largest_change']:+.1e} (u {row['at']['u']}, "
                            f"K {row['at']['strength']:.1f})")
             lines.append(f"| {index} | {len(served)} | {label} | {row['worst']:.2e} | "

@@ -98,16 +98,19 @@ _REACHES_CUTOFF_U = 1.0 / math.sqrt(2.0)
 #: give a worst error of 3e-5 up to strength 15 and 8e-5 in 15-25 (the fourth tier). The
 #: fine angular counts of the third and fourth tiers were then lowered (256 -> 128 and
 #: 384 -> 256) where the stored references of both calibrations show no loss: the largest
-#: change in a design's error 2e-11 and 2e-8 (``benchmarks/recheck_tiers.py``).
+#: change in a design's error 2e-11 and 2e-8 (``benchmarks/recheck_tiers.py``); so was the
+#: overlap rule's order along the chords (the second entry of ``overlap_nodes``: 28 -> 24,
+#: 40 -> 24, 56 -> 32 in tiers 1-3; largest change 1.5e-9, 1.7e-8 and 1.9e-9). Across the
+#: chords (the first entry) the order binds and stays.
 DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
     (1.0, 0.5, _TIER0_GRID, None),
-    (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 28)),
+    (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 24)),
      TierShortcut(trial=_TIER0_GRID,
                   check=dict(nodes=(20, 8), se_nodes=(200, 32), overlap_nodes=(16, 16)),
                   rtol=1e-5, u_max=_REACHES_CUTOFF_U)),
-    (15.0, _REACHES_CUTOFF_U, dict(nodes=(56, 28), se_nodes=(2400, 128), overlap_nodes=(40, 40)),
+    (15.0, _REACHES_CUTOFF_U, dict(nodes=(56, 28), se_nodes=(2400, 128), overlap_nodes=(40, 24)),
      None),
-    (math.inf, math.inf, dict(nodes=(80, 32), se_nodes=(2400, 256), overlap_nodes=(56, 56)),
+    (math.inf, math.inf, dict(nodes=(80, 32), se_nodes=(2400, 256), overlap_nodes=(56, 32)),
      None),
 )
 
@@ -118,7 +121,8 @@ _PRESET_ONLY = ("tiers", "radial")
 
 #: Named accuracy/speed settings of ``jmse``. ``nodes`` are OTF nodes per polar triangle
 #: (radial, angular), ``se_nodes`` the finer nodes on which the OTF is interpolated and
-#: ``S_e`` integrated, ``overlap_nodes`` the per-frequency autocorrelation rule.
+#: ``S_e`` integrated, ``overlap_nodes`` the per-frequency autocorrelation rule (chords
+#: across the overlap lens, Gauss nodes along each chord).
 #: ``tiers`` (``"default"`` only) adapts the grid to the aberration strength; the fixed grid
 #: listed with it is the second tier's (that of the paper's Fig. 1 point), used when a grid
 #: option is overridden. ``radial``: a rotationally symmetric design (any design on the axis)
@@ -128,11 +132,11 @@ _PRESET_ONLY = ("tiers", "radial")
 PRESETS: dict[str, dict] = {
     "fast": dict(
         quadrature="polar", nodes=(24, 16), se_nodes=(400, 120), otf_method="overlap",
-        overlap_nodes=(28, 28), tiers=None, radial=True,
+        overlap_nodes=(28, 20), tiers=None, radial=True,
     ),
     "default": dict(
         quadrature="polar", nodes=(40, 20), se_nodes=(2400, 160), otf_method="overlap",
-        overlap_nodes=(28, 28), tiers=DEFAULT_TIERS, radial=True,
+        overlap_nodes=(28, 24), tiers=DEFAULT_TIERS, radial=True,
     ),
     # 80 radial OTF nodes for H's (1 - r)^(3/2) edge on bands that reach the cutoff, 2800
     # radial S_e nodes for the ridges along the OTF's zeros at high SNR; each count differs
