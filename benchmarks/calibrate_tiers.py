@@ -41,30 +41,32 @@ import jmse_jax as jj
 REFERENCE = dict(nodes=(96, 48), se_nodes=(4800, 960), overlap_nodes=(64, 64))
 CHECK = dict(nodes=(112, 56), se_nodes=(6400, 1280), overlap_nodes=(96, 96))
 
-#: Candidate grids: the tiers before (``old_*``) and after this calibration, and others tried.
+#: Candidate grids: the tiers before (``old_*``) and after this calibration, others tried,
+#: and the default's present tier grids (``tier N``, read from ``DEFAULT_TIERS``; ``a2``,
+#: ``m2`` and ``t3`` are tiers 1-3 as calibrated, with equal overlap orders).
 CANDIDATES = {
     "old_t0 = tier 0": dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20)),
     "old_t1": dict(nodes=(48, 24), se_nodes=(1200, 192), overlap_nodes=(32, 32)),
     "old_t1, se 2400": dict(nodes=(48, 24), se_nodes=(2400, 192), overlap_nodes=(32, 32)),
     "f2": dict(nodes=(48, 24), se_nodes=(2400, 192), overlap_nodes=(28, 28)),
     "j": dict(nodes=(48, 24), se_nodes=(1800, 192), overlap_nodes=(28, 28)),
-    "a2 = tier 1": dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 28)),
+    "a2": dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 28)),
     "c2": dict(nodes=(36, 18), se_nodes=(2400, 160), overlap_nodes=(26, 26)),
     "k": dict(nodes=(32, 16), se_nodes=(2400, 128), overlap_nodes=(26, 26)),
     "l": dict(nodes=(36, 18), se_nodes=(1800, 128), overlap_nodes=(24, 24)),
     "old_t2": dict(nodes=(80, 32), se_nodes=(1600, 384), overlap_nodes=(56, 56)),
     "t2se": dict(nodes=(80, 32), se_nodes=(2400, 384), overlap_nodes=(56, 56)),
-    "t3 = tier 3": dict(nodes=(80, 32), se_nodes=(2400, 256), overlap_nodes=(56, 56)),
+    "t3": dict(nodes=(80, 32), se_nodes=(2400, 256), overlap_nodes=(56, 56)),
     "h2": dict(nodes=(64, 28), se_nodes=(2400, 256), overlap_nodes=(48, 48)),
     "m": dict(nodes=(56, 28), se_nodes=(2400, 256), overlap_nodes=(40, 40)),
-    "m2 = tier 2": dict(nodes=(56, 28), se_nodes=(2400, 128), overlap_nodes=(40, 40)),
+    "m2": dict(nodes=(56, 28), se_nodes=(2400, 128), overlap_nodes=(40, 40)),
+    **{f"tier {i}": dict(grid) for i, (*_, grid, _) in enumerate(jj.DEFAULT_TIERS) if i > 0},
     "shortcut check": dict(jj.DEFAULT_TIERS[1][3].check),
 }
-_STRONG = ("old_t2", "t2se", "t3 = tier 3", "h2", "m", "m2 = tier 2")
+_STRONG = ("old_t2", "t2se", "t3", "h2", "m", "m2", "tier 2", "tier 3")
 #: The candidates that are the default's present grids (``--current``), and the default
 #: itself as a user gets it (its tier chosen by the design, its shortcut applied).
-CURRENT = ("old_t0 = tier 0", "a2 = tier 1", "m2 = tier 2", "t3 = tier 3", "shortcut check",
-           "default")
+CURRENT = ("old_t0 = tier 0", "tier 1", "tier 2", "tier 3", "shortcut check", "default")
 #: Values ``u`` is drawn from (``--u`` replaces them).
 U_VALUES = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0)
 
@@ -158,10 +160,10 @@ def summary(rows: list[dict], candidates=CANDIDATES) -> str:
                          + " | ".join(cells) + " |")
     lines += ["", "Grids:", ""]
     lines += [f"- `{name}`: {options}" for name, options in candidates.items()]
-    return "\n".join(lines + shortcut_summary(rows)) + "\n"
+    return "\n".join(lines + shortcut_summary(rows, candidates)) + "\n"
 
 
-def shortcut_summary(rows: list[dict]) -> list[str]:
+def shortcut_summary(rows: list[dict], candidates=CANDIDATES) -> list[str]:
     """How the middle tier's shortcut fares on the designs the default sends to that tier.
 
     The shortcut is tried only for ``u <= u_max``; designs above the bound are reported
@@ -169,8 +171,10 @@ def shortcut_summary(rows: list[dict]) -> list[str]:
     from jmse_jax._merit import _accepts, _tier_index
 
     shortcut = jj.DEFAULT_TIERS[1][3]
-    trial_name = next(k for k in CANDIDATES if CANDIDATES[k] == shortcut.trial)
-    grid_name = next(k for k in CANDIDATES if CANDIDATES[k] == jj.DEFAULT_TIERS[1][2])
+    trial_name = next(k for k in candidates if candidates[k] == shortcut.trial)
+    # A report stored before the present tier-1 grid names its own tier-1 grid "... tier 1".
+    grid_name = next((k for k in candidates if candidates[k] == jj.DEFAULT_TIERS[1][2]),
+                     None) or next(k for k in candidates if k.endswith("tier 1"))
     middle = [r for r in rows if int(_tier_index(r["strength"], r["u"], jj.DEFAULT_TIERS)) == 1]
     lines = [
         "",

@@ -48,7 +48,7 @@ from jmse_jax._merit import _tier_index  # noqa: E402
 SOURCES = ("calibrate_tiers", "calibrate_tiers_kink")
 #: Fine angular counts tried by default, per tier index.
 DEFAULT_ANGULAR = {0: (48,), 1: (96,), 2: (256, 96), 3: (384, 192)}
-#: Orders along the chords tried by default, per tier index (the former values and one below).
+#: Orders along the chords tried by default, per tier index: the former ones (and 20 for tier 1).
 DEFAULT_ALONG = {1: (28, 20), 2: (40,), 3: (56,)}
 
 
