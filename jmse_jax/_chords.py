@@ -60,7 +60,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.polynomial import chebyshev as _cheb
 
-from ._numerics import cos_sin_2pi, gauss_legendre
+from ._numerics import cos_sin_2pi, gauss_legendre, materialise, runtime_one
 
 __all__ = ["chord_integral"]
 
@@ -228,26 +228,9 @@ def _endpoint(beta, g, derivatives):
     return t, dt_db_a.where(use_a, dt_db_k), dt_dg_a.where(use_a, dt_dg_k)
 
 
-def _runtime_one(x):
-    """1, computed from ``x`` at run time so that XLA cannot prove it (see _materialise)."""
-    return (jnp.abs(x) + 1.0) / (jnp.abs(x) + 1.0)
-
-
-def _materialise(*arrays):
-    """The arrays divided by a run-time 1 that XLA cannot prove to be 1.
-
-    XLA's CPU fusion copies cheap element-wise producers into every consumer. The chord
-    formulas have many consumers of the same intermediates (and the phases arrive as the
-    output of the wavefront polynomial), which would then be recomputed many times over; a
-    division counts as expensive, so XLA computes its operand once and stores it.
-    """
-    one = _runtime_one(arrays[0])
-    return tuple(a / one for a in arrays)
-
-
 def _chord(pm, p0, pp, derivatives):
     """``J`` (and ``dJ/db``, ``dJ/dg``) for phases in waves at ``t = -1, 0, 1``."""
-    pm, p0, pp = _materialise(pm, p0, pp)
+    pm, p0, pp = materialise(pm, p0, pp)
     c2_waves = 0.5 * (pp + pm) - p0
     flip = c2_waves < 0
     sgn = jnp.where(flip, -1.0, 1.0)
@@ -257,7 +240,7 @@ def _chord(pm, p0, pp, derivatives):
     c2 = jnp.abs(c2_waves)
     b, g = two_pi * c1, two_pi * c2
     beta1, beta2 = b - 2.0 * g, b + 2.0 * g
-    one = _runtime_one(g)  # dividing by it makes XLA store a value once (see _materialise)
+    one = runtime_one(g)  # dividing by it makes XLA store a value once (see materialise)
     e1 = _C(*(v / one for v in cos_sin_2pi(pm)))
     e2 = _C(*(v / one for v in cos_sin_2pi(pp)))
 

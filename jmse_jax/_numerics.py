@@ -28,6 +28,8 @@ __all__ = [
     "cos_sin_2pi",
     "gauss_legendre",
     "is_concrete",
+    "materialise",
+    "runtime_one",
     "safe_arccos",
     "safe_norm",
     "safe_sqrt",
@@ -109,6 +111,27 @@ def _cos_sin_2pi_jvp(primals, tangents):
     c, s = cos_sin_2pi(x)
     scale = 2.0 * math.pi * dx
     return (c, s), (-s * scale, c * scale)
+
+
+
+def runtime_one(x):
+    """1, computed from ``x`` at run time so that XLA cannot prove it (see ``materialise``);
+    no derivative flows through it."""
+    magnitude = jnp.abs(jax.lax.stop_gradient(x)) + 1.0
+    return magnitude / magnitude
+
+
+def materialise(*arrays):
+    """The arrays divided by a run-time 1 that XLA cannot prove to be 1.
+
+    XLA's CPU fusion copies element-wise producers into every consumer, even expensive ones
+    (``sin``, ``cos``, long polynomials): an intermediate with many consumers, or one
+    broadcast over a larger array, would be recomputed for every consumer and every element
+    of the broadcast. A division counts as expensive enough that XLA computes its operand
+    once and stores it. Values and derivatives are unchanged (division by exactly 1).
+    """
+    one = runtime_one(arrays[0])
+    return tuple(a / one for a in arrays)
 
 
 def common_dtype(*args):

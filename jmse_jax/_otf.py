@@ -47,6 +47,7 @@ from ._numerics import (
     common_dtype,
     cos_sin_2pi,
     gauss_legendre,
+    materialise,
     safe_arccos,
     safe_norm,
     safe_sqrt,
@@ -112,13 +113,26 @@ def _phase_integral(phase, weights, interp, moment):
     two axes of ``phase``. The derivative rule reuses the cosine and sine moments of the
     primal pass, so the backward pass costs almost nothing (no array of quadrature-node size
     is stored or recomputed).
+
+    The primal (value-only) pass sums ``exp(i 2 pi phase)`` as one complex reduction with the
+    Gauss weights ``w_j = sum_q moment[j, q]``: XLA then evaluates the trigonometric
+    polynomial once per node for both parts (as two real sums it evaluated it in two
+    fusions, once for each, and summed each in a separate pass).
     """
-    cos_m, sin_m = _phase_moments(phase, interp, moment)
-    return _contract(weights, cos_m), _contract(weights, sin_m)
+    cos_p, sin_p = cos_sin_2pi(_phase_at_nodes(phase, interp))
+    w = weights[..., None] * jnp.sum(moment, axis=-1)
+    total = jnp.sum(w * jax.lax.complex(cos_p, sin_p), axis=(-2, -1))
+    return jnp.real(total), jnp.imag(total)
+
+
+def _phase_at_nodes(phase, interp):
+    """The phase at the Gauss nodes along each chord from its values at the collocation
+    points."""
+    return jnp.einsum("...q,jq->...j", phase, interp, precision=EXACT)
 
 
 def _phase_moments(phase, interp, moment):
-    cos_p, sin_p = cos_sin_2pi(jnp.einsum("...q,jq->...j", phase, interp, precision=EXACT))
+    cos_p, sin_p = cos_sin_2pi(_phase_at_nodes(phase, interp))
     cos_m = jnp.einsum("...j,jq->...q", cos_p, moment, precision=EXACT)
     sin_m = jnp.einsum("...j,jq->...q", sin_p, moment, precision=EXACT)
     return cos_m, sin_m
@@ -201,6 +215,10 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
     phi = phi_max[:, None] * frac[None, :]  # (N, n_phi)
     sin_phi = jnp.sin(phi)
     a = jnp.cos(phi) - s_safe[:, None]  # distance of the chord from the lens's mid-line
+    # Stored once: XLA would otherwise recompute sin(phi) and cos(phi) at every collocation
+    # point of the chord phase, in each of the fusions that use them (the wavefront and,
+    # under reverse mode, each coefficient's derivative).
+    a, sin_phi = materialise(a, sin_phi)
     chord_w = phi_max[:, None] * w_frac[None, :] * sin_phi**2  # (N, n_phi)
     phase = _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc)
     if exact:
