@@ -113,3 +113,18 @@ def test_cos_sin_2pi_values_and_derivative():
     np.testing.assert_allclose(ds, 2 * np.pi * np.cos(2 * np.pi * reduced), atol=2e-14)
     g = jax.grad(lambda v: nm.cos_sin_2pi(v)[1])(jnp.asarray(0.5))  # at a rounding tie
     assert float(g) == pytest.approx(-2 * np.pi, rel=1e-14)
+
+
+def test_materialise_changes_values_and_derivatives_by_at_most_an_ulp():
+    # Division by the run-time 1 m / m must leave the numbers as they are: XLA rewrites
+    # a / (m / m) as (a m) / m (a 1-ulp change, seen at |x| ~ 1e9), nothing more; the
+    # derivative of the stored array is the identity (no term through the run-time 1).
+    x = jnp.asarray(np.linspace(-1e3, 1e3, 101) ** 3)
+    y = jnp.asarray(np.geomspace(1e-300, 1e290, 101))  # |y| (|x| + 1) inside the range
+    for fn in (nm.materialise, jax.jit(nm.materialise)):
+        a, b = fn(x, y)
+        np.testing.assert_allclose(np.asarray(a), np.asarray(x), rtol=2.3e-16, atol=0)
+        np.testing.assert_allclose(np.asarray(b), np.asarray(y), rtol=2.3e-16, atol=0)
+    grad = jax.grad(lambda v: jnp.sum(nm.materialise(v, 3.0 * v)[1] ** 2))(x)
+    np.testing.assert_allclose(np.asarray(grad), np.asarray(18.0 * x), rtol=7e-16, atol=0)
+    np.testing.assert_allclose(np.asarray(nm.runtime_one(x)), np.ones(101), rtol=2.3e-16)
