@@ -110,14 +110,15 @@ def _phase_integral(phase, weights, interp, moment):
 
     ``phase`` (..., chords, Q) holds the phase difference in waves at the collocation points
     of each chord and ``weights`` (..., chords) the chord weights; the sum runs over the last
-    two axes of ``phase``. The derivative rule reuses the cosine and sine moments of the
-    primal pass, so the backward pass costs almost nothing (no array of quadrature-node size
-    is stored or recomputed).
+    two axes of ``phase``. The derivative rule forms the cosine and sine moments per
+    collocation point once and takes both the value and the tangent from them, so the
+    backward pass costs almost nothing (no array of quadrature-node size is stored or
+    recomputed).
 
-    The primal (value-only) pass sums ``exp(i 2 pi phase)`` as one complex reduction with the
-    Gauss weights ``w_j = sum_q moment[j, q]``: XLA then evaluates the trigonometric
-    polynomial once per node for both parts (as two real sums it evaluated it in two
-    fusions, once for each, and summed each in a separate pass).
+    The value alone (no derivative) needs no moments: it sums ``exp(i 2 pi phase)`` as one
+    complex reduction with the Gauss weights ``w_j = sum_q moment[j, q]``, so XLA evaluates
+    the trigonometric polynomial once per node for both parts (as two real sums it evaluated
+    it in two fusions, once for each, and summed each in a separate pass).
     """
     cos_p, sin_p = cos_sin_2pi(_phase_at_nodes(phase, interp))
     w = weights[..., None] * jnp.sum(moment, axis=-1)
