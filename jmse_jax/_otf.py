@@ -45,7 +45,7 @@ from ._numerics import (
     check_finite_tree,
     check_range,
     common_dtype,
-    cos_sin_2pi,
+    cos_sin_2pi_stacked,
     gauss_legendre,
     materialise,
     safe_arccos,
@@ -115,15 +115,17 @@ def _phase_integral(phase, weights, interp, moment):
     backward pass costs almost nothing (no array of quadrature-node size is stored or
     recomputed).
 
-    The value alone (no derivative) needs no moments: it sums ``exp(i 2 pi phase)`` as one
-    complex reduction with the Gauss weights ``w_j = sum_q moment[j, q]``, so XLA evaluates
-    the trigonometric polynomial once per node for both parts (as two real sums it evaluated
-    it in two fusions, once for each, and summed each in a separate pass).
+    The value alone (no derivative) needs no moments: it contracts the stacked cosine and
+    sine at the Gauss nodes with the Gauss weights ``w_j = sum_q moment[j, q]``.
+
+    Both paths take the cosine and sine from ``cos_sin_2pi_stacked`` (one polynomial per
+    entry, one loop for both): with ``cos_sin_2pi`` XLA computed the two outputs in two
+    loops, each evaluating both half-angle polynomials (benchmarks/README.md).
     """
-    cos_p, sin_p = cos_sin_2pi(_phase_at_nodes(phase, interp))
-    w = weights[..., None] * jnp.sum(moment, axis=-1)
-    total = jnp.sum(w * jax.lax.complex(cos_p, sin_p), axis=(-2, -1))
-    return jnp.real(total), jnp.imag(total)
+    trig = cos_sin_2pi_stacked(_phase_at_nodes(phase, interp))  # (..., chords, 2, J)
+    parts = jnp.einsum("...kj,j->...k", trig, jnp.sum(moment, axis=-1), precision=EXACT)
+    return (jnp.sum(weights * parts[..., 0], axis=-1),
+            jnp.sum(weights * parts[..., 1], axis=-1))
 
 
 def _phase_at_nodes(phase, interp):
@@ -133,10 +135,10 @@ def _phase_at_nodes(phase, interp):
 
 
 def _phase_moments(phase, interp, moment):
-    cos_p, sin_p = cos_sin_2pi(_phase_at_nodes(phase, interp))
-    cos_m = jnp.einsum("...j,jq->...q", cos_p, moment, precision=EXACT)
-    sin_m = jnp.einsum("...j,jq->...q", sin_p, moment, precision=EXACT)
-    return cos_m, sin_m
+    """Cosine and sine moments per collocation point, each ``(..., chords, Q)``."""
+    trig = cos_sin_2pi_stacked(_phase_at_nodes(phase, interp))
+    moments = jnp.einsum("...kj,jq->...kq", trig, moment, precision=EXACT)
+    return moments[..., 0, :], moments[..., 1, :]
 
 
 def _contract(weights, moments):

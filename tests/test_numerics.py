@@ -115,6 +115,63 @@ def test_cos_sin_2pi_values_and_derivative():
     assert float(g) == pytest.approx(-2 * np.pi, rel=1e-14)
 
 
+def test_cos_sin_2pi_stacked_values_and_derivative():
+    x = np.concatenate([np.linspace(-3.0, 3.0, 601), [0.25, 0.5, -0.75, 1e3 + 0.125, -57.3]])
+    reduced = x - np.round(x)
+    xs = jnp.asarray(np.stack([x, x[::-1]]))  # batch axes are kept
+    e = nm.cos_sin_2pi_stacked(xs)
+    assert e.shape == (2, 2, x.size)
+    for row, r in ((e[0], reduced), (e[1], reduced[::-1])):
+        np.testing.assert_allclose(row[0], np.cos(2 * np.pi * r), atol=2e-15)
+        np.testing.assert_allclose(row[1], np.sin(2 * np.pi * r), atol=2e-15)
+    de = jax.jvp(nm.cos_sin_2pi_stacked, (xs,), (jnp.ones_like(xs),))[1][0]
+    np.testing.assert_allclose(de[0], -2 * np.pi * np.sin(2 * np.pi * reduced), atol=2e-14)
+    np.testing.assert_allclose(de[1], 2 * np.pi * np.cos(2 * np.pi * reduced), atol=2e-14)
+    g = jax.grad(lambda v: nm.cos_sin_2pi_stacked(v)[0, 0])(jnp.asarray([0.5]))  # a tie
+    assert float(g[0]) == pytest.approx(0.0, abs=1e-13)
+    g = jax.grad(lambda v: nm.cos_sin_2pi_stacked(v)[1, 0])(jnp.asarray([0.5]))
+    assert float(g[0]) == pytest.approx(-2 * np.pi, rel=1e-14)
+    # float32 stays float32 and accurate to its rounding
+    e32 = nm.cos_sin_2pi_stacked(jnp.asarray(x, jnp.float32))
+    assert e32.dtype == jnp.float32
+    np.testing.assert_allclose(e32[1], np.sin(2 * np.pi * reduced), atol=2e-6)
+
+
+def _chebyshev_in_powers(f, degree, n=40):
+    """Chebyshev series of f on z in [0, (pi/2)^2] in extended precision, cut at
+    ``degree`` and written in powers of z (how ``_COS_H`` and ``_SIN_H`` were made)."""
+    ld = np.longdouble
+    pi = ld("3.14159265358979323846264338327950288")
+    a, b = ld(0), (pi / 2) ** 2
+    theta = pi * (np.arange(n, dtype=ld) + ld(0.5)) / n
+    z = (a + b) / 2 + (b - a) / 2 * np.cos(theta)
+    values = f(z)
+    series = [2 * np.sum(values * np.cos(j * theta)) / n for j in range(degree + 1)]
+    series[0] /= 2
+    scale, offset = ld(2) / (b - a), -(a + b) / (b - a)  # Chebyshev variable = scale z + offset
+    powers = [np.array([ld(1)]), np.array([offset, scale])]
+    for _ in range(2, degree + 1):
+        nxt = 2 * np.convolve(powers[-1], np.array([offset, scale]))
+        nxt[: powers[-2].size] -= powers[-2]
+        powers.append(nxt)
+    out = np.zeros(degree + 1, dtype=ld)
+    for c, p in zip(series, powers, strict=True):
+        out[: p.size] += c * p
+    return out
+
+
+@pytest.mark.skipif(np.finfo(np.longdouble).eps > 1e-18,
+                    reason="the fit needs extended precision (x86 long double)")
+def test_trigonometric_coefficients_are_the_documented_chebyshev_fit():
+    def sinc(z):
+        r = np.sqrt(z)
+        return np.where(r > 0, np.sin(r) / np.where(r > 0, r, 1), 1)
+
+    for fitted, f in ((nm._COS_H, lambda z: np.cos(np.sqrt(z))), (nm._SIN_H, sinc)):
+        np.testing.assert_allclose(np.asarray(fitted), _chebyshev_in_powers(f, 8).astype(float),
+                                   rtol=1e-12, atol=0)
+
+
 def test_materialise_changes_values_and_derivatives_by_at_most_an_ulp():
     # Division by the run-time 1 m / m must leave the numbers as they are: XLA rewrites
     # a / (m / m) as (a m) / m (a 1-ulp change, seen at |x| ~ 1e9), nothing more; the
