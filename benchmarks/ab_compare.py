@@ -1,0 +1,108 @@
+"""Time two (or more) versions of the package side by side, in one process.
+
+On a shared host, timings of the same code move by 10-30 % between processes and minutes;
+an A/B comparison made of separate runs mixes that drift into the difference. This script
+loads each version's ``jmse_jax`` under its own module name into one process, compiles the
+same calls for each, and then alternates between them in rounds, keeping each call's
+fastest time. Each version is a checkout, e.g. a ``git worktree`` of the older commit::
+
+    git worktree add /tmp/old <commit>
+    taskset -c 1 python benchmarks/ab_compare.py /tmp/old . --problem fig1 \\
+        --presets fast,default --modes value,vag
+
+``taskset -c 1`` (one core) gives steadier figures than two cores shared with the host.
+Problems are the test bank's (``tests/problems.py``); values are printed to 16 digits next
+to the times, so a change that should only round can be checked at the same time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import pathlib
+import shutil
+import sys
+import tempfile
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tests"))
+
+from problems import PROBLEMS_BY_NAME  # noqa: E402
+
+
+def _parse_args(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("checkouts", nargs="+", help="directories that hold a jmse_jax package")
+    parser.add_argument("--problem", default="fig1", help="bank problem (tests/problems.py)")
+    parser.add_argument("--presets", default="fast,default", help="comma separated")
+    parser.add_argument("--modes", default="value,vag", help="value and/or vag")
+    parser.add_argument("--rounds", type=int, default=7, help="alternation rounds")
+    parser.add_argument("--calls", type=int, default=5, help="calls per version per round")
+    return parser.parse_args(argv)
+
+
+def _load(checkouts):
+    """Each checkout's package as its own module (``jmse_ab0``, ``jmse_ab1``, ...)."""
+    tmp = tempfile.mkdtemp(prefix="jmse_ab_")
+    sys.path.insert(0, tmp)
+    modules = []
+    for i, checkout in enumerate(checkouts):
+        source = pathlib.Path(checkout) / "jmse_jax"
+        if not (source / "__init__.py").is_file():
+            raise SystemExit(f"{checkout!r} holds no jmse_jax package")
+        shutil.copytree(source, os.path.join(tmp, f"jmse_ab{i}"))
+        modules.append(importlib.import_module(f"jmse_ab{i}"))
+    return modules
+
+
+def _rebuild(obj, module):
+    """``obj`` (an aberration or spectrum of the installed package) as ``module``'s class."""
+    if not hasattr(obj, "__dataclass_fields__"):
+        return obj
+    cls = getattr(module, type(obj).__name__)
+    return cls(**{name: getattr(obj, name) for name in obj.__dataclass_fields__})
+
+
+def main(argv=None):
+    args = _parse_args(argv)
+    problem = PROBLEMS_BY_NAME[args.problem]
+    modules = _load(args.checkouts)
+    presets, modes = args.presets.split(","), args.modes.split(",")
+    calls = {}
+    for i, module in enumerate(modules):
+        operands = [_rebuild(x, module) for x in problem.arguments()]
+        for preset in presets:
+            for mode in modes:
+                def merit(w, operands=operands, preset=preset, module=module):
+                    return module.jmse(w, *operands[1:], preset=preset)
+
+                fn = jax.jit(merit if mode == "value" else jax.value_and_grad(merit))
+                out = jax.block_until_ready(fn(operands[0]))
+                value = float(out if mode == "value" else out[0])
+                calls[i, preset, mode] = (fn, operands[0], value)
+    best = dict.fromkeys(calls, float("inf"))
+    for _ in range(args.rounds):
+        for key, (fn, w, _) in calls.items():
+            for _ in range(args.calls):
+                start = time.perf_counter()
+                jax.block_until_ready(fn(w))
+                best[key] = min(best[key], time.perf_counter() - start)
+    print(f"{args.problem}: fastest of {args.rounds} x {args.calls} calls per version")
+    for preset in presets:
+        for mode in modes:
+            cells = []
+            for i, checkout in enumerate(args.checkouts):
+                key = (i, preset, mode)
+                cells.append(f"{checkout}: {best[key] * 1e3:.2f} ms ({calls[key][2]:.15e})")
+            row = " | ".join(cells)
+            print(f"  {preset:8s} {mode:5s} {row}")
+
+
+if __name__ == "__main__":
+    main()
