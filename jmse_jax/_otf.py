@@ -45,6 +45,7 @@ from ._numerics import (
     check_finite_tree,
     check_range,
     common_dtype,
+    cos_sin_2pi,
     cos_sin_2pi_stacked,
     gauss_legendre,
     materialise,
@@ -216,8 +217,8 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
     ex, ey = nx / s_safe, ny / s_safe  # unit vector along nu
     phi_max = jnp.arccos(s_safe)
     phi = phi_max[:, None] * frac[None, :]  # (N, n_phi)
-    sin_phi = jnp.sin(phi)
-    a = jnp.cos(phi) - s_safe[:, None]  # distance of the chord from the lens's mid-line
+    cos_phi, sin_phi = cos_sin_2pi(phi * (0.5 / math.pi))  # faster than jnp.cos, jnp.sin
+    a = cos_phi - s_safe[:, None]  # distance of the chord from the lens's mid-line
     # Stored once: XLA would otherwise recompute sin(phi) and cos(phi) at every collocation
     # point of the chord phase, in each of the fusions that use them (the wavefront and,
     # under reverse mode, each coefficient's derivative).
