@@ -137,12 +137,14 @@ def test_cos_sin_2pi_stacked_values_and_derivative():
     np.testing.assert_allclose(e32[1], np.sin(2 * np.pi * reduced), atol=2e-6)
 
 
-def _chebyshev_in_powers(f, degree, n=40):
-    """Chebyshev series of f on z in [0, (pi/2)^2] in extended precision, cut at
-    ``degree`` and written in powers of z (how ``_COS_H`` and ``_SIN_H`` were made)."""
-    ld = np.longdouble
-    pi = ld("3.14159265358979323846264338327950288")
-    a, b = ld(0), (pi / 2) ** 2
+_PI = np.longdouble("3.14159265358979323846264338327950288")
+
+
+def _chebyshev_in_powers(f, b, degree, n=40):
+    """Chebyshev series of f on z in [0, b] in extended precision, cut at ``degree`` and
+    written in powers of z (how ``_COS_H``, ``_SIN_H`` and ``_SIN_PI_R`` were made)."""
+    ld, pi = np.longdouble, _PI
+    a = ld(0)
     theta = pi * (np.arange(n, dtype=ld) + ld(0.5)) / n
     z = (a + b) / 2 + (b - a) / 2 * np.cos(theta)
     values = f(z)
@@ -163,12 +165,18 @@ def _chebyshev_in_powers(f, degree, n=40):
 @pytest.mark.skipif(np.finfo(np.longdouble).eps > 1e-18,
                     reason="the fit needs extended precision (x86 long double)")
 def test_trigonometric_coefficients_are_the_documented_chebyshev_fit():
-    def sinc(z):
-        r = np.sqrt(z)
-        return np.where(r > 0, np.sin(r) / np.where(r > 0, r, 1), 1)
+    def sin_over_root(scale):
+        def f(z):
+            r = np.sqrt(z)
+            return np.where(r > 0, np.sin(scale * r) / np.where(r > 0, r, 1), scale)
+        return f
 
-    for fitted, f in ((nm._COS_H, lambda z: np.cos(np.sqrt(z))), (nm._SIN_H, sinc)):
-        np.testing.assert_allclose(np.asarray(fitted), _chebyshev_in_powers(f, 8).astype(float),
+    half_turn = (_PI / 2) ** 2
+    for fitted, f, b in ((nm._COS_H, lambda z: np.cos(np.sqrt(z)), half_turn),
+                         (nm._SIN_H, sin_over_root(1), half_turn),
+                         (nm._SIN_PI_R, sin_over_root(_PI), np.longdouble(0.25))):
+        np.testing.assert_allclose(np.asarray(fitted),
+                                   _chebyshev_in_powers(f, b, 8).astype(float),
                                    rtol=1e-12, atol=0)
 
 
