@@ -24,7 +24,6 @@ from ._numerics import (
     check_range,
     common_dtype,
     is_concrete,
-    ynn_barrier,
 )
 from ._otf import OTF_METHODS, _otf_fft, _otf_nudft, _otf_overlap, otf_fft_grid
 from ._quadrature import (
@@ -308,7 +307,7 @@ def _fine_parts(h, l_a, u, signal, noise, n_r, n_a, angles, dtype, adjoint):
     denominator = (h_re * h_re + h_im * h_im) * s_x + s_n
     s_e = s_x * s_n / denominator  # error_spectral_density, with its denominator kept
     s_x_out = _signal_at(signal, fine, outer=True)  # H = 0 beyond the cutoff
-    value = jnp.sum(ynn_barrier(fine.weights * s_e)) + jnp.sum(fine.outer_weights * s_x_out)
+    value = jnp.sum(fine.weights * s_e) + jnp.sum(fine.outer_weights * s_x_out)
     if not adjoint:
         return value
     # dS_e/dRe(H) + i dS_e/dIm(H) = -2 S_x^2 S_n H / D^2 = -2 (S_e S_x / D) H.

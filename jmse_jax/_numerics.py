@@ -31,7 +31,6 @@ __all__ = [
     "is_concrete",
     "materialise",
     "runtime_one",
-    "ynn_barrier",
     "safe_arccos",
     "safe_norm",
     "safe_sqrt",
@@ -167,18 +166,6 @@ def _cos_sin_2pi_stacked_jvp(primals, tangents):
     e = cos_sin_2pi_stacked(x)
     rotated = jnp.stack([-e[..., 1, :], e[..., 0, :]], axis=-2)
     return e, (2.0 * math.pi) * rotated * dx[..., None, :]
-
-
-def ynn_barrier(x):
-    """``x`` unchanged (NaN stays NaN), through a select that XLA cannot remove.
-
-    XLA's CPU backend hands a reduction, together with every element-wise producer it can
-    take, to a YNNPACK fusion, which evaluates long element-wise chains (spectra, the
-    error spectral density) several times slower than XLA's own vectorised loops. YNNPACK
-    takes no select, so a select at the end of a chain keeps the chain in an XLA loop and
-    leaves only the reduction to YNNPACK (benchmarks/README.md, optimisation log).
-    """
-    return jnp.where(x != x, jnp.full_like(x, jnp.nan), x)
 
 
 def runtime_one(x):

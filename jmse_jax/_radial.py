@@ -40,7 +40,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import EXACT, barycentric_matrix, gauss_legendre, safe_arccos, ynn_barrier
+from ._numerics import EXACT, barycentric_matrix, gauss_legendre, safe_arccos
 from ._otf import _otf_overlap
 from ._quadrature import _RADIAL_EDGES, OUTER_NODES, _radial_counts
 
@@ -167,8 +167,7 @@ def radial_band_integral(aberrations, field, u, signal, noise, options, dtype):
         s_n = noise(r, jnp.zeros_like(r))
         return s_x * s_n / (h * h * s_x + s_n)
 
-    total = (jnp.sum(ynn_barrier(w_a * s_e(h_a, r_a)))
-             + jnp.sum(ynn_barrier(w_b * s_e(h_b, r_b))))
+    total = jnp.sum(w_a * s_e(h_a, r_a)) + jnp.sum(w_b * s_e(h_b, r_b))
 
     # Beyond the cutoff: S_e = S_x.
     x, w_x = (jnp.asarray(c, dtype) for c in gauss_legendre(OUTER_NODES, 0.0, 1.0))
