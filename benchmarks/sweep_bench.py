@@ -51,6 +51,9 @@ def _parse_args(argv=None):
     parser.add_argument("--modes", default="value,grad", help="value and/or grad")
     parser.add_argument("--batch-size", type=int, default=None,
                         help="designs per device per vmap (default: sweep's, 1 on CPU)")
+    parser.add_argument("--chunks-per-call", type=int, default=None,
+                        help="chunks each device works through per call (default: sweep's, "
+                             "up to 8 on CPU)")
     parser.add_argument("--workers", default=None,
                         help="host threads issuing calls, comma separated (default: sweep's, "
                              "cores per device on CPU)")
@@ -113,13 +116,15 @@ def _worker(args) -> dict:
     runs = []
     for _ in range(max(1, args.repeats)):
         result = jj.sweep(merit, designs, grad=args.mode == "grad", valid=physical,
-                          batch_size=args.batch_size, workers=workers, progress=False)
+                          batch_size=args.batch_size, chunks_per_call=args.chunks_per_call,
+                          workers=workers, progress=False)
         runs.append(result.metadata)
     best = min(runs, key=lambda m: m["run_s"])
     float64_difference = None
     if args.dtype != "float64" and jax.device_count() == 1:  # accuracy of the cheaper dtype
         reference = jj.sweep(merit, {k: v.astype(np.float64) for k, v in designs.items()},
-                             valid=physical, batch_size=args.batch_size, workers=workers,
+                             valid=physical, batch_size=args.batch_size,
+                             chunks_per_call=args.chunks_per_call, workers=workers,
                              progress=False)
         ok = result.ok & reference.ok
         float64_difference = float(np.max(np.abs(
@@ -134,6 +139,7 @@ def _worker(args) -> dict:
         "n_designs": n,
         "padded_designs": best["padded_designs"],
         "batch_size": best["batch_size"],
+        "chunks_per_call": best.get("chunks_per_call"),
         "workers": best["workers"],
         "compile_s": [m["compile_s"] for m in runs],
         "run_s": [m["run_s"] for m in runs],
@@ -159,6 +165,8 @@ def _run_configuration(args, n_devices: int, mode: str, workers: int | None) -> 
                "--repeats", str(args.repeats), "--dtype", args.dtype]
     if args.batch_size is not None:
         command += ["--batch-size", str(args.batch_size)]
+    if args.chunks_per_call is not None:
+        command += ["--chunks-per-call", str(args.chunks_per_call)]
     if workers is not None:
         command += ["--workers", str(workers)]
     for item in args.option:
@@ -198,7 +206,8 @@ def _markdown(report: dict) -> str:
         f"{' (with uncommitted changes)' if machine.get('dirty') else ''}",
         f"- load average at start: {machine.get('load_at_start', {}).get('uptime')}",
         f"- jmse preset {report['preset']!r}, options {report['options']}, "
-        f"batch_size {report['batch_size']} per device",
+        f"batch_size {report['batch_size']} per device, "
+        f"chunks_per_call {report.get('chunks_per_call')}",
     ]
     if all(row.get("platform", "cpu") == "cpu" for row in report["rows"]):
         lines.append("- fake CPU devices share the same cores: more devices do not add "
@@ -266,6 +275,9 @@ def main(argv=None) -> None:
         "options": _options(args),
         "batch_size": (args.batch_size if args.batch_size is not None
                        else next((r["batch_size"] for r in rows if "batch_size" in r), None)),
+        "chunks_per_call": (args.chunks_per_call if args.chunks_per_call is not None
+                            else next((r.get("chunks_per_call") for r in rows
+                                       if "batch_size" in r), None)),
         "machine": machine,
         "rows": rows,
     }

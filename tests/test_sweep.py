@@ -158,6 +158,21 @@ def test_default_workers_on_cpu():
     assert result.metadata["workers"] == max(1, cores // jax.device_count())
 
 
+@pytest.mark.parametrize("n, batch_size, chunks", [
+    (300, 1, 8), (128, 1, 8), (127, 1, 7), (40, 1, 2), (5, 1, 1), (300, 2, 1),
+])
+def test_default_chunks_per_call_on_cpu(n, batch_size, chunks):
+    """On a CPU with one design per chunk, a call works through up to 8 designs (n // 16 for
+    small batches); with a vmap it stays one chunk. The results do not change."""
+    x = np.linspace(0.0, 1.0, n)
+    result = jj.sweep(lambda d: d["x"] ** 2 + 1.0, {"x": x}, batch_size=batch_size,
+                      progress=False)
+    assert result.metadata["chunks_per_call"] == chunks
+    calls = -(-n // (chunks * batch_size))
+    assert result.metadata["calls"] == calls
+    np.testing.assert_allclose(result.value, x**2 + 1.0, rtol=1e-15)
+
+
 def test_has_aux_and_integer_leaves():
     batch = {"x": np.array([1.0, 2.0, 3.0]), "k": np.array([1, 2, 3])}
     result = jj.sweep(lambda d: (d["x"] * d["k"], {"half": 0.5 * d["x"]}), batch,
