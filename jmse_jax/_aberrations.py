@@ -55,6 +55,12 @@ class AbstractAberrations(eqx.Module):
         """
         return self.chord_degree
 
+    def difference(self, x, y, dx, dy, field):
+        """``W(x + dx, y + dy) - W(x - dx, y - dy)``: the phase difference the overlap OTF
+        engine integrates (``(dx, dy) = nu``). The default evaluates the wavefront twice;
+        a model can give a cheaper closed form (``Seidel`` does)."""
+        return self(x + dx, y + dy, field) - self(x - dx, y - dy, field)
+
     def radially_symmetric(self, field):
         """Whether ``W`` less its tilt depends on ``rho`` only at this ``field``.
 
@@ -112,6 +118,22 @@ class Seidel(AbstractAberrations):
         radial = (self.w020 + self.w220 * h2) + self.w040 * rho2
         linear_y = self.w131 * h * rho2 + self.w311 * h2 * h + self.w111 * h
         return rho2 * radial + y * linear_y + self.w222 * h2 * y * y
+
+    def difference(self, x, y, dx, dy, field):
+        # Each term's difference in closed form, with p = (x, y).(dx, dy) and
+        # S = |(x, y)|^2 + |(dx, dy)|^2 (so |(x, y) +- (dx, dy)|^2 = S +- 2p):
+        # d(rho^2) = 4p, d(rho^4) = 8pS, d(y rho^2) = 4py + 2S dy, d(y) = 2 dy, d(y^2) = 4y dy.
+        # About half the operations of two evaluations, no cancellation between two large
+        # values, and a reverse pass whose per-coefficient sums are as short.
+        h = field
+        h2 = h * h
+        p = x * dx + y * dy
+        s = (x * x + y * y) + (dx * dx + dy * dy)
+        radial = (self.w020 + self.w220 * h2) + (2.0 * self.w040) * s
+        coma = self.w131 * h
+        tilt = self.w311 * h2 * h + self.w111 * h
+        return (4.0 * p * (radial + coma * y) + (2.0 * dy) * (coma * s + tilt)
+                + (4.0 * self.w222 * h2) * (y * dy))
 
     @property
     def x_symmetric(self) -> bool:

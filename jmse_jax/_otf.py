@@ -194,7 +194,7 @@ def _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc):
     xi_x = along * ex4 - across * ey4
     xi_y = along * ey4 + across * ex4
     dx, dy = nx[:, None, None, None], ny[:, None, None, None]
-    return aberrations(xi_x + dx, xi_y + dy, field) - aberrations(xi_x - dx, xi_y - dy, field)
+    return aberrations.difference(xi_x, xi_y, dx, dy, field)
 
 
 def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):

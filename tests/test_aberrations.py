@@ -40,6 +40,50 @@ def test_seidel_terms_individually():
     assert float(jj.wavefront(ab, 0.0, -0.5, 1.0)) == pytest.approx(-0.125 + 0.25 - 0.5 - 0.5)
 
 
+def _closed_sum(ab, h, points):
+    weights, x, y, dx, dy = points
+    return jnp.sum(weights * ab.difference(x, y, dx, dy, h))
+
+
+def _twice_sum(ab, h, points):
+    weights, x, y, dx, dy = points
+    return jnp.sum(weights * (ab(x + dx, y + dy, h) - ab(x - dx, y - dy, h)))
+
+
+def test_seidel_difference_matches_two_evaluations():
+    """The closed-form ``W(xi + d) - W(xi - d)`` against the SPEC formula evaluated twice
+    (float64, extended-precision NumPy oracle), with its derivatives in every coefficient
+    and the field against the two-evaluation form's."""
+    import jax
+
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        coefficients = dict(zip(SEIDEL_KEYS, rng.uniform(-8, 8, len(SEIDEL_KEYS)), strict=True))
+        field = rng.uniform(0, 1)
+        x, y = rng.uniform(-1, 1, (2, 64))
+        dx, dy = rng.uniform(-0.7, 0.7, (2, 64))
+        ab = jj.Seidel(**coefficients)
+        got = ab.difference(jnp.asarray(x), jnp.asarray(y), jnp.asarray(dx), jnp.asarray(dy),
+                            field)
+        want = (seidel_wavefront(coefficients, x + dx, y + dy, field)
+                - seidel_wavefront(coefficients, x - dx, y - dy, field))
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+
+        points = (jnp.asarray(rng.standard_normal(64)), x, y, dx, dy)
+        g_closed = jax.grad(_closed_sum, argnums=(0, 1))(ab, jnp.asarray(field), points)
+        g_twice = jax.grad(_twice_sum, argnums=(0, 1))(ab, jnp.asarray(field), points)
+        for a, b in zip(jax.tree_util.tree_leaves(g_closed), jax.tree_util.tree_leaves(g_twice),
+                        strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-11)
+
+
+def test_zernike_difference_is_two_evaluations():
+    ab = jj.Zernike(jnp.asarray([0.0, 0.0, 0.3, -0.5, 0.8, 0.2, -0.4, 0.6, 0.1, 0.7, -0.2]))
+    x, y, dx, dy = (jnp.asarray(v) for v in np.random.default_rng(4).uniform(-0.6, 0.6, (4, 9)))
+    np.testing.assert_array_equal(ab.difference(x, y, dx, dy, 0.4),
+                                  ab(x + dx, y + dy, 0.4) - ab(x - dx, y - dy, 0.4))
+
+
 def test_seidel_is_even_in_x():
     ab = jj.Seidel(w020=1.1, w040=-2.0, w131=0.7, w222=1.3, w220=-0.4, w311=0.2, w111=0.9)
     x, y = np.linspace(-0.9, 0.9, 7), np.linspace(0.8, -0.8, 7)
