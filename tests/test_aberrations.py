@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -52,10 +53,8 @@ def _twice_sum(ab, h, points):
 
 def test_seidel_difference_matches_two_evaluations():
     """The closed-form ``W(xi + d) - W(xi - d)`` against the SPEC formula evaluated twice
-    (float64, extended-precision NumPy oracle), with its derivatives in every coefficient
-    and the field against the two-evaluation form's."""
-    import jax
-
+    (the float64 NumPy oracle), with its derivatives in every coefficient and the field
+    against the two-evaluation form's."""
     rng = np.random.default_rng(3)
     for _ in range(4):
         coefficients = dict(zip(SEIDEL_KEYS, rng.uniform(-8, 8, len(SEIDEL_KEYS)), strict=True))
