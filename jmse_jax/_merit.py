@@ -288,32 +288,38 @@ def _signal_at(signal, panels, outer):
     return signal(panels.nu_x, panels.nu_y)
 
 
-def _fine_parts(h, l_a, u, signal, noise, n_r, n_a, angles, dtype, adjoint):
+def _fine_parts(h, l_a, l_a_t, u, signal, noise, n_r, n_a, angles, dtype, adjoint):
     """``sum w S_e`` over a block of angular rows of the fine grid (``angles``: their angle
     fractions and weights; ``l_a``: their rows of the angular interpolation matrix) and their
     outer nodes; with ``adjoint``, also ``L_a^T g`` where
     ``g = w dS_e/dRe(H) + i w dS_e/dIm(H)``.
 
-    ``h`` holds the radially interpolated OTF as real numbers, ``(2, n_coarse, 2 n_r)`` with
-    the real parts first: the real matrix ``l_a`` then takes real products (half the flops
-    of complex ones), and the adjoint comes back in the same layout. These products contract
-    over at most a few dozen rows, so their summation order is fixed.
+    ``h`` holds the radially interpolated OTF as real numbers, ``(2, 2, n_coarse, n_r)``:
+    real and imaginary parts on the first axis, the two triangles on the second. The real
+    matrix ``l_a`` then takes real products (half the flops of complex ones), and the adjoint
+    comes back in the same layout. These products contract over at most a few dozen rows, so
+    their summation order is fixed.
     """
     fine = polar_panels(u, n_r, n_a, dtype, n_outer=OUTER_NODES, angles=angles)
     h = jnp.matmul(l_a, h, precision=EXACT)
-    h_re, h_im = h[..., :n_r], h[..., n_r:]
+    h_re, h_im = h[0], h[1]
     s_x = _signal_at(signal, fine, outer=False)
     s_n = noise(fine.nu_x, fine.nu_y)
     denominator = (h_re * h_re + h_im * h_im) * s_x + s_n
     s_e = s_x * s_n / denominator  # error_spectral_density, with its denominator kept
     s_x_out = _signal_at(signal, fine, outer=True)  # H = 0 beyond the cutoff
-    value = jnp.sum(fine.weights * s_e) + jnp.sum(fine.outer_weights * s_x_out)
+    # The radial sums as a product with the radial weights: a reduction would take S_e's
+    # element-wise chain into a YNNPACK fusion, which evaluates it several times slower
+    # than XLA's own loop; a product leaves the chain to that loop.
+    rows = jnp.matmul(s_e, fine.radial_weights, precision=EXACT)
+    value = jnp.sum(fine.row_weights * rows) + jnp.sum(fine.outer_weights * s_x_out)
     if not adjoint:
         return value
     # dS_e/dRe(H) + i dS_e/dIm(H) = -2 S_x^2 S_n H / D^2 = -2 (S_e S_x / D) H.
     coefficient = -2.0 * fine.weights * s_e * s_x / denominator
-    g = jnp.concatenate([coefficient * h_re, coefficient * h_im], axis=-1)
-    return value, jnp.matmul(l_a.T, g, precision=EXACT)
+    g = coefficient * h  # real and imaginary parts alike (no concatenation to copy)
+    # l_a_t: l_a transposed in memory, so that the product has the layout YNNPACK takes.
+    return value, jnp.matmul(l_a_t, g, precision=EXACT)
 
 
 def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
@@ -330,31 +336,36 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
     split = angular_split(u, coarse[1], dtype)
     l_a = jnp.asarray(l_a_rows, dtype)[split[0]]
     frac, w_frac = angular_rule(u, coarse[1], dtype, split=split, fine=n_a)
-    # Separable interpolation, radial axis first (the cheaper order). The radial products
-    # (which contract over up to n_r fine nodes in the adjoint) stay complex: as real
-    # products XLA's threaded GEMM summed in an order that depended on the program and
-    # broke the bit-for-bit equality of sweeps across device counts. The angular products,
-    # inside the blocks, contract over a few dozen rows and are real (``_fine_parts``).
-    h = jnp.matmul(h_coarse, jnp.asarray(l_r.T, dtype), precision=EXACT)
-    h = jnp.concatenate([jnp.real(h), jnp.imag(h)], axis=-1)
+    # Separable interpolation, radial axis first (the cheaper order). Every product is real
+    # (real and imaginary parts stacked on a leading axis) with its matrix stored in the
+    # layout YNNPACK takes (``l_r.T`` transposed on the host): complex products, and real
+    # ones with a transposed operand, went to XLA's own dot at 3-6x the time. An earlier
+    # attempt at real radial products (a concatenated layout that XLA's threaded GEMM took)
+    # summed in an order that depended on the program and broke the bit-for-bit equality of
+    # sweeps across device counts; these pass it (``tests/test_sweep.py``).
+    l_r_t = jnp.asarray(np.ascontiguousarray(l_r.T), dtype)
+    h = jnp.stack([jnp.matmul(jnp.real(h_coarse), l_r_t, precision=EXACT),
+                   jnp.matmul(jnp.imag(h_coarse), l_r_t, precision=EXACT)])
     # The blocks run one after another in a loop, so the program holds one block, not one
     # copy per block: an unrolled version took 21 s to trace and compile the default's
     # value_and_grad against 13 s, at the same run time (benchmarks/README.md). Padded rows
     # carry zero weight and zero interpolation rows, so they add exact zeros.
     n_blocks, size = _fine_blocks(n_r, n_a)
     pad = n_blocks * size - n_a
+    l_a = jnp.concatenate([l_a, jnp.zeros((pad, l_a.shape[1]), dtype)]).reshape(n_blocks,
+                                                                                size, -1)
     rows = (
-        jnp.concatenate([l_a, jnp.zeros((pad, l_a.shape[1]), dtype)]).reshape(n_blocks, size,
-                                                                               -1),
+        l_a,
+        jnp.swapaxes(l_a, 1, 2),
         jnp.concatenate([frac, jnp.full(pad, 0.5, dtype)]).reshape(n_blocks, size),
         jnp.concatenate([w_frac, jnp.zeros(pad, dtype)]).reshape(n_blocks, size),
     )
 
     def block(carry, rows):
         total, back = carry
-        rows_l, frac, w_frac = rows
-        part = _fine_parts(h, rows_l, u, signal, noise, n_r, n_a, (frac, w_frac), dtype,
-                           adjoint)
+        rows_l, rows_l_t, frac, w_frac = rows
+        part = _fine_parts(h, rows_l, rows_l_t, u, signal, noise, n_r, n_a, (frac, w_frac),
+                           dtype, adjoint)
         if adjoint:
             part, block_back = part
             back = back + block_back
@@ -368,8 +379,9 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
         (total, back), _ = jax.lax.scan(block, carry, rows)
     if not adjoint:
         return total
-    back = jax.lax.complex(back[..., :n_r], back[..., n_r:])
-    return total, jnp.matmul(back, jnp.asarray(l_r, dtype), precision=EXACT)
+    l_r = jnp.asarray(l_r, dtype)
+    return total, jax.lax.complex(jnp.matmul(back[0], l_r, precision=EXACT),
+                                  jnp.matmul(back[1], l_r, precision=EXACT))
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5, 6))

@@ -213,7 +213,8 @@ class PolarPanels(NamedTuple):
     nodes cover the part of each ray beyond the cutoff (``H = 0``, so ``S_e = S_x``).
     Weights include the polar Jacobian ``r`` and the factor 4 of the folded quadrants.
     ``radius`` and ``outer_radius`` are ``|nu|`` at the nodes (shaped ``(n_angles, n)``, the
-    same for both triangles).
+    same for both triangles). The inner weights factor as
+    ``row_weights[:, None] * radial_weights[None, :]`` (``(n_angles,)`` and ``(n_radial,)``).
     """
 
     nu_x: jax.Array
@@ -224,6 +225,8 @@ class PolarPanels(NamedTuple):
     outer_weights: jax.Array
     radius: jax.Array
     outer_radius: jax.Array
+    row_weights: jax.Array | None = None
+    radial_weights: jax.Array | None = None
 
 
 def polar_panels(u, n_radial: int, n_angular: int, dtype=None, n_outer: int | None = None,
@@ -266,8 +269,10 @@ def polar_panels(u, n_radial: int, n_angular: int, dtype=None, n_outer: int | No
     nu_y = jnp.stack([r * sin_a, r * cos_a])
     out_x = jnp.stack([r_out * cos_a, r_out * sin_a])
     out_y = jnp.stack([r_out * sin_a, r_out * cos_a])
+    # The inner weights factor as row_weights[a] * radial_weights[i] (both triangles alike).
+    row_weights = 4.0 * w_alpha * inner * inner
     return PolarPanels(nu_x, nu_y, jnp.stack([w, w]), out_x, out_y, jnp.stack([w_out, w_out]),
-                       r, r_out)
+                       r, r_out, row_weights, t * w_t)
 
 
 def polar_interpolation_matrices(coarse: tuple[int, int], fine: tuple[int, int]):
