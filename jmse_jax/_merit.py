@@ -294,32 +294,41 @@ def _fine_parts(h, l_a, l_a_t, u, signal, noise, n_r, n_a, angles, dtype, adjoin
     outer nodes; with ``adjoint``, also ``L_a^T g`` where
     ``g = w dS_e/dRe(H) + i w dS_e/dIm(H)``.
 
-    ``h`` holds the radially interpolated OTF as real numbers, ``(2, 2, n_coarse, n_r)``:
-    real and imaginary parts on the first axis, the two triangles on the second. The real
-    matrix ``l_a`` then takes real products (half the flops of complex ones), and the adjoint
-    comes back in the same layout. These products contract over at most a few dozen rows, so
-    their summation order is fixed.
+    ``h`` holds the radially interpolated OTF as real numbers, ``(n_coarse, 2, 2, n_r)``:
+    coarse angular rows first, then real and imaginary parts, then the two triangles. The
+    real matrix ``l_a`` then takes one real product (half the flops of a complex one) in the
+    plain row-major layout YNNPACK takes, and the adjoint comes back in the same layout.
+    These products contract over at most a few dozen rows, so their summation order is
+    fixed.
     """
     fine = polar_panels(u, n_r, n_a, dtype, n_outer=OUTER_NODES, angles=angles)
-    h = jnp.matmul(l_a, h, precision=EXACT)
-    h_re, h_im = h[0], h[1]
+    size = l_a.shape[0]
+    h = jnp.matmul(l_a, h.reshape(h.shape[0], -1), precision=EXACT).reshape(size, 2, 2, n_r)
+    h_re, h_im = h[:, 0], h[:, 1]  # (rows, triangles, n_r)
+    # The fine grid's arrays, (triangles, rows, n_r), to this layout: isotropic spectra come
+    # as (rows, n_r) and broadcast; the weights factor as row x radial.
     s_x = _signal_at(signal, fine, outer=False)
+    s_x = jnp.swapaxes(s_x, 0, 1) if s_x.ndim == 3 else s_x[:, None, :]
     s_n = noise(fine.nu_x, fine.nu_y)
+    s_n = jnp.swapaxes(s_n, 0, 1) if jnp.ndim(s_n) == 3 else s_n
     denominator = (h_re * h_re + h_im * h_im) * s_x + s_n
     s_e = s_x * s_n / denominator  # error_spectral_density, with its denominator kept
     s_x_out = _signal_at(signal, fine, outer=True)  # H = 0 beyond the cutoff
     # The radial sums as a product with the radial weights: a reduction would take S_e's
     # element-wise chain into a YNNPACK fusion, which evaluates it several times slower
     # than XLA's own loop; a product leaves the chain to that loop.
-    rows = jnp.matmul(s_e, fine.radial_weights, precision=EXACT)
-    value = jnp.sum(fine.row_weights * rows) + jnp.sum(fine.outer_weights * s_x_out)
+    rows = jnp.matmul(s_e, fine.radial_weights, precision=EXACT)  # (rows, triangles)
+    value = (jnp.sum(fine.row_weights[:, None] * rows)
+             + jnp.sum(fine.outer_weights * s_x_out))
     if not adjoint:
         return value
     # dS_e/dRe(H) + i dS_e/dIm(H) = -2 S_x^2 S_n H / D^2 = -2 (S_e S_x / D) H.
-    coefficient = -2.0 * fine.weights * s_e * s_x / denominator
-    g = coefficient * h  # real and imaginary parts alike (no concatenation to copy)
+    weights = fine.row_weights[:, None, None] * fine.radial_weights
+    coefficient = -2.0 * weights * s_e * s_x / denominator
+    g = coefficient[:, None] * h  # real and imaginary parts alike
     # l_a_t: l_a transposed in memory, so that the product has the layout YNNPACK takes.
-    return value, jnp.matmul(l_a_t, g, precision=EXACT)
+    back = jnp.matmul(l_a_t, g.reshape(size, -1), precision=EXACT)
+    return value, back.reshape(l_a_t.shape[0], 2, 2, n_r)
 
 
 def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
@@ -346,6 +355,7 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
     l_r_t = jnp.asarray(np.ascontiguousarray(l_r.T), dtype)
     h = jnp.stack([jnp.matmul(jnp.real(h_coarse), l_r_t, precision=EXACT),
                    jnp.matmul(jnp.imag(h_coarse), l_r_t, precision=EXACT)])
+    h = jnp.transpose(h, (2, 0, 1, 3))  # (coarse rows, re/im, triangles, n_r), see above
     # The blocks run one after another in a loop, so the program holds one block, not one
     # copy per block: an unrolled version took 21 s to trace and compile the default's
     # value_and_grad against 13 s, at the same run time (benchmarks/README.md). Padded rows
@@ -380,6 +390,7 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
     if not adjoint:
         return total
     l_r = jnp.asarray(l_r, dtype)
+    back = jnp.transpose(back, (1, 2, 0, 3))  # (re/im, triangles, coarse rows, n_r)
     return total, jax.lax.complex(jnp.matmul(back[0], l_r, precision=EXACT),
                                   jnp.matmul(back[1], l_r, precision=EXACT))
 
