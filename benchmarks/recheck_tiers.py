@@ -12,10 +12,12 @@ Usage (from the repository root; ~4 min on 2 cores)::
 
     .venv/bin/python benchmarks/recheck_tiers.py [--angular 1:96,64 2:256 3:384,192]
                                                  [--along 1:28,20 2:40 3:56]
+                                                 [--floor 0:24,10 1:24,10 2:12 3:12]
 
-``--angular TIER:A,B,...`` lists the fine angular counts tried for a tier and ``--along
+``--angular TIER:A,B,...`` lists the fine angular counts tried for a tier, ``--along
 TIER:A,B,...`` the overlap rule's orders along the chords (the second entry of
-``overlap_nodes``). The defaults are the values of the 2026-11-24 checks, which lowered the
+``overlap_nodes``) and ``--floor TIER:A,B,...`` its order on the inner radial panels
+(``overlap_floor``). The defaults are the values of the 2026-11-24 checks, which lowered the
 angular count of tier 2 from 256 to 128 and of tier 3 from 384 to 256, and the order along
 the chords of tiers 1, 2 and 3 from 28, 40 and 56 to 24, 24 and 32. Tier 0's grid is also
 tier 1's trial: a change to its angular count is checked on tier 1's designs through the
@@ -50,6 +52,9 @@ SOURCES = ("calibrate_tiers", "calibrate_tiers_kink")
 DEFAULT_ANGULAR = {0: (48,), 1: (96,), 2: (256, 96), 3: (384, 192)}
 #: Orders along the chords tried by default, per tier index: the former ones (and 20 for tier 1).
 DEFAULT_ALONG = {1: (28, 20), 2: (40,), 3: (56,)}
+#: Overlap floors tried by default, per tier index: the presets' and 10 for the tiers that use
+#: 12 since 2026-11-25, and 12 for those that keep the presets'.
+DEFAULT_FLOOR = {0: (24, 10), 1: (24, 10), 2: (12,), 3: (12,)}
 
 
 def _designs() -> list[dict]:
@@ -126,9 +131,12 @@ def main() -> None:
     parser.add_argument("--angular", nargs="*", help="TIER:A,B,... fine angular counts to try")
     parser.add_argument("--along", nargs="*",
                         help="TIER:A,B,... overlap orders along the chords to try")
+    parser.add_argument("--floor", nargs="*",
+                        help="TIER:A,B,... overlap floors (overlap_floor) to try")
     args = parser.parse_args()
     angular = _parse_counts(args.angular, DEFAULT_ANGULAR)
     along = _parse_counts(args.along, DEFAULT_ALONG)
+    floors = _parse_counts(args.floor, DEFAULT_FLOOR)
     designs = _designs()
     report = dict(description=__doc__.split("\n\n")[0], machine=common.machine_info(),
                   sources=list(SOURCES), tiers=[])
@@ -154,12 +162,17 @@ def main() -> None:
             if order != grid["overlap_nodes"][1]:
                 variant = dict(grid, overlap_nodes=(grid["overlap_nodes"][0], order))
                 variants.append((variant, _errors(variant, served)))
+        for floor in floors.get(index, ()):
+            if floor != grid.get("overlap_floor", jj.OVERLAP_FLOOR):
+                variant = dict(grid, overlap_floor=floor)
+                variants.append((variant, _errors(variant, served)))
         entry = dict(tier=index, designs=len(served), grid=grid, variants=[])
         for variant, errors in variants:
             is_present = variant is grid
             change = errors - present
             worst_change = int(np.argmax(change))
             row = dict(angular=variant["se_nodes"][1], along=variant["overlap_nodes"][1],
+                       floor=variant.get("overlap_floor", jj.OVERLAP_FLOOR),
                        worst=float(errors.max()),
                        p90=float(np.percentile(errors, 90)), median=float(np.median(errors)),
                        largest_change=float(change[worst_change]),
@@ -168,7 +181,7 @@ def main() -> None:
                                strength=served[worst_change]["strength"]))
             entry["variants"].append(row)
             label = (f"nodes {tuple(variant['nodes'])}, se {tuple(variant['se_nodes'])}, "
-                     f"overlap {tuple(variant['overlap_nodes'])}"
+                     f"overlap {tuple(variant['overlap_nodes'])}, floor {row['floor']}"
                      + (" (present)" if is_present else ""))
             change_text = ("–" if is_present else
                            f"{row['largest_change']:+.1e} (u {row['at']['u']}, "

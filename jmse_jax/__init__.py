@@ -15,6 +15,7 @@ from ._aberrations import (
 )
 from ._merit import (
     DEFAULT_TIERS as DEFAULT_TIERS,
+    OVERLAP_FLOOR as OVERLAP_FLOOR,
     PRESETS as PRESETS,
     TierShortcut as TierShortcut,
     aberration_strength as aberration_strength,

@@ -41,6 +41,7 @@ from ._spectra import AbstractNoise, AbstractSignal, error_spectral_density
 
 __all__ = [
     "DEFAULT_TIERS",
+    "OVERLAP_FLOOR",
     "PRESETS",
     "TierShortcut",
     "U_MAX",
@@ -73,7 +74,20 @@ class TierShortcut(NamedTuple):
     u_max: float = math.inf
 
 
-_TIER0_GRID = dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20))
+#: Smallest overlap order on the inner radial panels of the grids of the default's two
+#: weakest tiers (and of the shortcut's grids), which serve designs of strength <= 5: their
+#: full order is sized for that bound, so the inner panels, whose phase variation across
+#: the overlap lens is at most ``t_max`` times the outer panel's, need proportionally fewer
+#: nodes (``_polar_otf``). On the stored calibration designs (``benchmarks/recheck_tiers.py
+#: --floor``) tiers 0 and 1 keep their worst errors (2.0e-6 and 2.1e-5) and no design's
+#: error moves by more than 2.7e-6 (10 moved some by 1.5e-5); on the unbounded tiers 2 and
+#: 3 a floor of 12 would not hold (tier 3: 3.0e-4 instead of 8.4e-5), so they keep the
+#: presets' ``OVERLAP_FLOOR``. About a quarter less overlap work for the tiers that use it.
+_WEAK_FLOOR = 12
+#: The presets' ``overlap_floor`` (see ``_polar_otf``).
+OVERLAP_FLOOR = 24
+_TIER0_GRID = dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20),
+                   overlap_floor=_WEAK_FLOOR)
 #: Above ``u = 1/sqrt(2)`` rays of the band reach the cutoff, where H has its
 #: ``(1 - r)^{3/2}`` edge, or end just short of it, and polynomial interpolation along the
 #: rays needs more radial OTF nodes. There the middle tier's shortcut is not tried (its
@@ -104,9 +118,11 @@ _REACHES_CUTOFF_U = 1.0 / math.sqrt(2.0)
 #: chords (the first entry) the order binds and stays.
 DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
     (1.0, 0.5, _TIER0_GRID, None),
-    (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 24)),
+    (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 24),
+                         overlap_floor=_WEAK_FLOOR),
      TierShortcut(trial=_TIER0_GRID,
-                  check=dict(nodes=(20, 8), se_nodes=(200, 32), overlap_nodes=(16, 16)),
+                  check=dict(nodes=(20, 8), se_nodes=(200, 32), overlap_nodes=(16, 16),
+                             overlap_floor=_WEAK_FLOOR),
                   rtol=1e-5, u_max=_REACHES_CUTOFF_U)),
     (15.0, _REACHES_CUTOFF_U, dict(nodes=(56, 28), se_nodes=(2400, 128), overlap_nodes=(40, 24)),
      None),
@@ -115,7 +131,8 @@ DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
 )
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
-_GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes")
+_GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
+                 "overlap_floor")
 #: Preset entries that are not ``jmse`` keywords.
 _PRESET_ONLY = ("tiers", "radial")
 
@@ -133,10 +150,12 @@ PRESETS: dict[str, dict] = {
     "fast": dict(
         quadrature="polar", nodes=(24, 16), se_nodes=(400, 120), otf_method="overlap",
         overlap_nodes=(28, 20), tiers=None, radial=True,
+        overlap_floor=OVERLAP_FLOOR,
     ),
     "default": dict(
         quadrature="polar", nodes=(40, 20), se_nodes=(2400, 160), otf_method="overlap",
         overlap_nodes=(28, 24), tiers=DEFAULT_TIERS, radial=True,
+        overlap_floor=OVERLAP_FLOOR,
     ),
     # 80 radial OTF nodes for H's (1 - r)^(3/2) edge on bands that reach the cutoff, 2800
     # radial S_e nodes for the ridges along the OTF's zeros at high SNR; each count differs
@@ -145,6 +164,7 @@ PRESETS: dict[str, dict] = {
     "high": dict(
         quadrature="polar", nodes=(80, 40), se_nodes=(2800, 960), otf_method="overlap",
         overlap_nodes=(48, 48), tiers=None, radial=True,
+        overlap_floor=OVERLAP_FLOOR,
     ),
 }
 
@@ -167,6 +187,8 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
     check_choice("otf_method", options["otf_method"], OTF_METHODS)
     check_count("B", options["B"])
     options["overlap_nodes"] = _pair("overlap_nodes", options["overlap_nodes"])
+    check_count("overlap_floor", options["overlap_floor"])
+    options["overlap_floor"] = int(options["overlap_floor"])
     if options["quadrature"] == "polar":
         options["nodes"] = _pair("nodes", options["nodes"])
         if options["se_nodes"] is not None:
@@ -232,26 +254,24 @@ def _otf_at(aberrations, nu_x, nu_y, field, options):
     return _otf_fft(aberrations, nu_x, nu_y, field, options["B"])
 
 
-#: Smallest overlap order used on the innermost radial panel (see ``_polar_otf``).
-_OVERLAP_MIN_ORDER = 24
-
-
 def _polar_otf(aberrations, nu_x, nu_y, field, options):
     """OTF on the coarse polar nodes ``(2, n_angular, n_radial)``, panel by radial panel.
 
     The phase difference across the overlap lens grows with ``|nu|``, so the overlap rule's
     order is reduced on the inner radial panels in proportion to their outer radius
-    ``t_max``: ``n = n_min + (n_full - n_min) t_max`` (the full order on the outer panel).
+    ``t_max``: ``n = floor + (n_full - floor) t_max`` per axis, at most ``n_full`` (the full
+    order on the outer panel), with ``floor`` the option ``overlap_floor``.
     With the private option ``_remat_otf`` (see ``_tier_plans``) reverse mode recomputes the
     inner panels' blocks instead of storing their chord moments.
     """
     if options["otf_method"] != "overlap":
         return _otf_at(aberrations, nu_x, nu_y, field, options)
     n_phi, n_t = options["overlap_nodes"]
+    floor = options["overlap_floor"]
     parts, start = [], 0
     for count, t_max in radial_panel_sizes(nu_x.shape[-1]):
         order = tuple(
-            min(n, math.ceil(_OVERLAP_MIN_ORDER + (n - _OVERLAP_MIN_ORDER) * t_max))
+            min(n, math.ceil(floor + (n - floor) * t_max))
             for n in (n_phi, n_t)
         )
         stop = start + count
@@ -853,6 +873,7 @@ def jmse(
     se_nodes=None,
     otf_method: str | None = None,
     overlap_nodes=None,
+    overlap_floor: int | None = None,
     B: int | None = None,
 ):
     """Predicted mean-squared error after Wiener restoration (JMSE), Berkner & Shroff Eq. (7).
@@ -887,10 +908,10 @@ def jmse(
         grid (``"fast"``, ``optimise``'s default). Every preset integrates a rotationally
         symmetric design (any design on the axis; ``radially_symmetric``) with isotropic
         spectra along one ray instead (``jmse_jax._radial``: 10-20 times faster than the
-        polar grid, and more accurate). Setting
-        any grid option (``quadrature``, ``nodes``, ``se_nodes``, ``otf_method``,
-        ``overlap_nodes``) fixes the grid (no tiers, no one-ray path): the unset ones take
-        the second tier's values.
+        polar grid, and more accurate). Setting any grid option (``quadrature``,
+        ``nodes``, ``se_nodes``, ``otf_method``, ``overlap_nodes``, ``overlap_floor``) fixes
+        the grid (no tiers, no one-ray path): the unset ones take the second tier's values,
+        but for ``overlap_floor``, which stays at ``OVERLAP_FLOOR``.
     quadrature : {"polar", "gauss", "gauss_polar", "trapezoid", "rectangle"}
         Frequency rule over the band (``jmse_jax._quadrature``).
     nodes : int or (int, int)
@@ -904,6 +925,13 @@ def jmse(
     otf_method : {"overlap", "nudft", "fft"}
     overlap_nodes : int or (int, int)
         ``(n_phi, n_t)`` of the overlap engine.
+    overlap_floor : int
+        ``"polar"`` with ``"overlap"`` only: the overlap order on the inner radial panels of
+        the band, where the phase varies less across the overlap lens, is
+        ``overlap_floor + (n - overlap_floor) t_max`` per axis (``t_max``: the panel's outer
+        end as a fraction of the ray; at most ``n``). 24 in every preset's fixed grid
+        (``OVERLAP_FLOOR``); the default's tiers for designs of strength <= 5 and the
+        shortcut's grids use 12.
     B : int
         Pupil grid of the ``"nudft"``/``"fft"`` engines.
 
@@ -937,7 +965,7 @@ def jmse(
     """
     options = jmse_options(
         preset, quadrature=quadrature, nodes=nodes, se_nodes=se_nodes, otf_method=otf_method,
-        overlap_nodes=overlap_nodes, B=B,
+        overlap_nodes=overlap_nodes, overlap_floor=overlap_floor, B=B,
     )
     _validate(aberrations, field, u, signal, noise)
     dtype = common_dtype(aberrations, field, u, signal, noise)

@@ -259,6 +259,7 @@ def _call(fig1, fn=jj.jmse, **changes):
         (dict(field=1.2), r"field must be in \[0\.0, 1\.0\], got 1\.2"),
         (dict(nodes=0), r"nodes\[0\] must be an integer >= 1, got 0"),
         (dict(overlap_nodes=(0, 8)), r"overlap_nodes\[0\] must be an integer >= 1, got 0"),
+        (dict(overlap_floor=0), r"overlap_floor must be an integer >= 1, got 0"),
         (dict(se_nodes=(64, -1)), r"se_nodes\[1\] must be an integer >= 1, got -1"),
         (dict(quadrature="gauss", nodes=0), r"nodes must be an integer >= 1, got 0"),
         (dict(quadrature="bogus"), r"quadrature must be one of 'polar', .*, got 'bogus'"),

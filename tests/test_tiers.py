@@ -357,3 +357,43 @@ def test_derivative_rule_differentiates_only_the_operands_with_tangents(monkeypa
         assert live == want, (name, live)
         central = (merit(**{name: step}) - merit(**{name: -step})) / (2 * step)
         np.testing.assert_allclose(tangent, central, rtol=1e-6)
+
+
+@pytest.mark.parametrize("overlap, floor, expected", [
+    ((20, 20), 10, {(12, 12), (14, 14), (20, 20)}),
+    ((28, 20), 10, {(13, 12), (18, 14), (28, 20)}),
+    ((20, 20), 24, {(20, 20)}),
+])
+def test_overlap_floor_sets_each_radial_panel_order(monkeypatch, overlap, floor, expected):
+    """On a radial panel that ends at ``t_max`` of the ray the overlap order is
+    ``ceil(floor + (n - floor) t_max)`` per axis, at most ``n``: with 24 radial nodes the
+    panels (7, 7 and 10 nodes) end at 0.15, 0.4 and 1."""
+    from jmse_jax import _merit
+
+    orders = []
+    original = _merit._otf_overlap
+
+    def spy(aberrations, nu_x, nu_y, field, nodes, remat=False):
+        orders.append((tuple(nodes), nu_x.shape[-1]))
+        return original(aberrations, nu_x, nu_y, field, nodes, remat)
+
+    monkeypatch.setattr(_merit, "_otf_overlap", spy)
+    ab, field, u, _ = DESIGNS[1]
+    jax.jit(lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, nodes=(24, 12), se_nodes=(96, 24),
+                              overlap_nodes=overlap, overlap_floor=floor))(ab)
+    assert {order for order, _ in orders} == expected
+    assert sorted(count for _, count in orders) == [7, 7, 10]
+
+
+def test_weak_tiers_floor_is_accurate_and_cheaper():
+    """The weak tiers' grids with their floor of 10 against the same grids with the full
+    order on every panel: within 1e-7 on the tier-0 and Fig. 1 designs (the bank's
+    references are checked in ``test_shortcut_keeps_the_middle_tier_accurate``), and the
+    floor binds (it lowers the inner panels' orders)."""
+    for ab, field, u, tier in DESIGNS[:2]:
+        grid = dict(jj.DEFAULT_TIERS[0][2])
+        assert grid["overlap_floor"] < min(grid["overlap_nodes"])
+        reduced = float(jj.jmse(ab, field, u, SIGNAL, NOISE, **grid))
+        full = float(jj.jmse(ab, field, u, SIGNAL, NOISE,
+                             **dict(grid, overlap_floor=max(grid["overlap_nodes"]))))
+        assert abs(reduced - full) <= 1e-7 * full, (tier, reduced, full)
