@@ -582,7 +582,8 @@ def run(quick: bool = False, only: list[str] | None = None, tag: str = "",
                              reference_fallback="high" if quick else "strict")
     timing_case = next((c for c in cases if c.name == "fig1"), cases[0])
     rows = []
-    for method in methods(quick):
+    method_list = methods(quick)
+    for method in method_list:
         if only and not any(word in method.name for word in only):
             continue
         t0 = time.perf_counter()
@@ -602,7 +603,7 @@ def run(quick: bool = False, only: list[str] | None = None, tag: str = "",
               f"  compile {common.fmt_seconds(row['compile_s'])}  "
               f"[{time.perf_counter() - t0:.0f} s]", flush=True)
     print("the headline methods again, in alternation ...", flush=True)
-    alternated = alternate_headline_timings(rows, methods(quick), timing_case)
+    alternated = alternate_headline_timings(rows, method_list, timing_case)
     tiered = None
     if not only or any("default" in word for word in only):
         print("the adaptive default on every bank case ...", flush=True)

@@ -385,11 +385,11 @@ def test_overlap_floor_sets_each_radial_panel_order(monkeypatch, overlap, floor,
     assert sorted(count for _, count in orders) == [7, 7, 10]
 
 
-def test_weak_tiers_floor_is_accurate_and_cheaper():
-    """The weak tiers' grids with their floor of 10 against the same grids with the full
-    order on every panel: within 1e-7 on the tier-0 and Fig. 1 designs (the bank's
-    references are checked in ``test_shortcut_keeps_the_middle_tier_accurate``), and the
-    floor binds (it lowers the inner panels' orders)."""
+def test_weak_tiers_floor_is_accurate_and_binds():
+    """Tier 0's grid (also the shortcut's trial) with its lowered floor against the same
+    grid with the full order on every panel: within 1e-7 on the tier-0 and Fig. 1 designs
+    (the bank's references are checked in ``test_shortcut_keeps_the_middle_tier_accurate``),
+    and the floor binds (it is below the grid's orders, so the inner panels use fewer)."""
     for ab, field, u, tier in DESIGNS[:2]:
         grid = dict(jj.DEFAULT_TIERS[0][2])
         assert grid["overlap_floor"] < min(grid["overlap_nodes"])
