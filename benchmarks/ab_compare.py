@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import os
 import pathlib
 import shutil
@@ -27,6 +28,8 @@ import tempfile
 import time
 
 import jax
+import jax.numpy as jnp
+import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
@@ -44,6 +47,10 @@ def _parse_args(argv=None):
     parser.add_argument("--modes", default="value,vag", help="value and/or vag")
     parser.add_argument("--rounds", type=int, default=7, help="alternation rounds")
     parser.add_argument("--calls", type=int, default=5, help="calls per version per round")
+    parser.add_argument("--options", default="{}",
+                        help='jmse keyword overrides as JSON, e.g. \'{"nodes": [24, 12]}\'')
+    parser.add_argument("--dtype", default="float64", choices=("float64", "float32"),
+                        help="dtype of the problem's numbers, hence of the computation")
     return parser.parse_args(argv)
 
 
@@ -61,12 +68,17 @@ def _load(checkouts):
     return modules
 
 
-def _rebuild(obj, module):
-    """``obj`` (an aberration or spectrum of the installed package) as ``module``'s class."""
+def _cast(x, dtype):
+    return jnp.asarray(x, dtype) if isinstance(x, (float, int, np.ndarray, jax.Array)) else x
+
+
+def _rebuild(obj, module, dtype="float64"):
+    """``obj`` (an aberration or spectrum of the installed package) as ``module``'s class,
+    its numbers in ``dtype``."""
     if not hasattr(obj, "__dataclass_fields__"):
-        return obj
+        return _cast(obj, dtype)
     cls = getattr(module, type(obj).__name__)
-    return cls(**{name: getattr(obj, name) for name in obj.__dataclass_fields__})
+    return cls(**{name: _cast(getattr(obj, name), dtype) for name in obj.__dataclass_fields__})
 
 
 def main(argv=None):
@@ -74,13 +86,15 @@ def main(argv=None):
     problem = PROBLEMS_BY_NAME[args.problem]
     modules = _load(args.checkouts)
     presets, modes = args.presets.split(","), args.modes.split(",")
+    options = {k: tuple(v) if isinstance(v, list) else v
+               for k, v in json.loads(args.options).items()}
     calls = {}
     for i, module in enumerate(modules):
-        operands = [_rebuild(x, module) for x in problem.arguments()]
+        operands = [_rebuild(x, module, args.dtype) for x in problem.arguments()]
         for preset in presets:
             for mode in modes:
                 def merit(w, operands=operands, preset=preset, module=module):
-                    return module.jmse(w, *operands[1:], preset=preset)
+                    return module.jmse(w, *operands[1:], preset=preset, **options)
 
                 fn = jax.jit(merit if mode == "value" else jax.value_and_grad(merit))
                 out = jax.block_until_ready(fn(operands[0]))
@@ -93,7 +107,8 @@ def main(argv=None):
                 start = time.perf_counter()
                 jax.block_until_ready(fn(w))
                 best[key] = min(best[key], time.perf_counter() - start)
-    print(f"{args.problem}: fastest of {args.rounds} x {args.calls} calls per version")
+    print(f"{args.problem} ({args.dtype}): fastest of {args.rounds} x {args.calls} calls "
+          "per version")
     for preset in presets:
         for mode in modes:
             cells = []

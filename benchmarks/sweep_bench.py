@@ -120,15 +120,26 @@ def _worker(args) -> dict:
                           workers=workers, progress=False)
         runs.append(result.metadata)
     best = min(runs, key=lambda m: m["run_s"])
-    float64_difference = None
+    float64_difference = grad_difference = None
     if args.dtype != "float64" and jax.device_count() == 1:  # accuracy of the cheaper dtype
         reference = jj.sweep(merit, {k: v.astype(np.float64) for k, v in designs.items()},
-                             valid=physical, batch_size=args.batch_size,
-                             chunks_per_call=args.chunks_per_call, workers=workers,
-                             progress=False)
+                             grad=args.mode == "grad", valid=physical,
+                             batch_size=args.batch_size, chunks_per_call=args.chunks_per_call,
+                             workers=workers, progress=False)
         ok = result.ok & reference.ok
         float64_difference = float(np.max(np.abs(
             result.value[ok].astype(np.float64) / reference.value[ok] - 1.0)))
+        if args.mode == "grad":
+            # Per design: the largest difference of a gradient component from float64,
+            # relative to the largest component of that design's float64 gradient (the
+            # lens variables differ in scale; the field's derivative is 0 on the axis).
+            keys = ("stop_distance", "front_curvature")
+            got = np.stack([result.grad[k][ok].astype(np.float64) for k in keys], -1)
+            want = np.stack([reference.grad[k][ok] for k in keys], -1)
+            scale = np.max(np.abs(want), axis=-1)
+            relative = np.max(np.abs(got - want), axis=-1) / scale
+            grad_difference = [float(np.median(relative)), float(np.percentile(relative, 99)),
+                               float(np.max(relative))]
     n = best["n_designs"]
     memory = best["memory"] or {}
     return {
@@ -147,6 +158,7 @@ def _worker(args) -> dict:
         "status_counts": result.status_counts(),
         "dtype": args.dtype,
         "max_rel_diff_from_float64": float64_difference,
+        "grad_rel_diff_from_float64": grad_difference,
         "xla_temp_bytes_per_device": memory.get("temp_bytes"),
         "xla_temp_bytes_per_design": (memory["temp_bytes"] / best["batch_size"]
                                       if memory.get("temp_bytes") is not None else None),
@@ -238,6 +250,13 @@ def _markdown(report: dict) -> str:
             lines.append(f"\n{row['mode']}, {row['n_devices']} device: largest relative "
                          f"difference of the {row['dtype']} values from float64 "
                          f"{row['max_rel_diff_from_float64']:.1e}.")
+            if row.get("grad_rel_diff_from_float64") is not None:
+                median, p99, worst = row["grad_rel_diff_from_float64"]
+                lines.append(f"Gradients (stop distance, front curvature): per design, the "
+                             f"largest difference of a component from float64 relative to "
+                             f"the design's largest float64 component: median {median:.1e}, "
+                             f"99th percentile {p99:.1e}, largest {worst:.1e} (the largest "
+                             f"where a gradient nearly vanishes, near a design's optimum).")
     lines += ["", "`run s` excludes compilation (the executable is compiled ahead of time; "
               "`compile s` is that step). XLA temp MB/design is XLA's temporary-buffer size "
               "of the compiled sweep per device divided by `batch_size`: the memory to budget "

@@ -929,7 +929,9 @@ def jmse(
         cost, so this buys accuracy almost for free.
     otf_method : {"overlap", "nudft", "fft"}
     overlap_nodes : int or (int, int)
-        ``(n_phi, n_t)`` of the overlap engine.
+        ``(n_phi, n_t)`` of the overlap engine. In float32 the engine rounds ``n_t`` (and
+        each inner panel's, see ``overlap_floor``) up to a multiple of 8, which its CPU
+        loops run fastest at (``_otf.along_chord_order``); float64 takes it as given.
     overlap_floor : int
         ``"polar"`` with ``"overlap"`` only: the overlap order on the inner radial panels of
         the band, where the phase varies less across the overlap lens, is

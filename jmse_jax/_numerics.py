@@ -106,6 +106,13 @@ _SIN_PI_R = (
     -2.1903542801737785e-05, 7.698079571127892e-07,
 )
 
+#: The same fit cut at degree 4 in z, for float32 (``cos_sin_2pi_stacked``): absolute error
+#: about 2e-7 in ``sin(pi r)``, at float32's rounding (degree 5 is no better there).
+_SIN_PI_R_F32 = (
+    3.141592640130707, -5.167710083507896, 2.5500775232145503, -0.5982912856197554,
+    0.07765766030371939,
+)
+
 
 def _even_poly(coefficients, z):
     result = jnp.full_like(z, coefficients[-1])
@@ -156,7 +163,8 @@ def cos_sin_2pi_stacked(x):
     shift = jnp.asarray([[0.0], [0.25]], x.dtype)
     y = x[..., None, :] - shift
     r = y - jnp.round(y)
-    s = _even_poly(_SIN_PI_R, r * r) * r
+    coefficients = _SIN_PI_R_F32 if jnp.finfo(x.dtype).bits <= 32 else _SIN_PI_R
+    s = _even_poly(coefficients, r * r) * r
     return 1.0 - 2.0 * (s * s)
 
 

@@ -188,22 +188,31 @@ SMALL_TIERS = (
 def test_float32_design_with_float64_spectra_differentiates(monkeypatch):
     """A float32 design with the signal and noise given as Python floats (float64 with x64
     on): the tier switch's derivative rule returns a float32 tangent (it raised a dtype
-    error), and value and gradient equal the float64 ones to float32 accuracy."""
+    error), and value and gradient equal the float64 ones of the grid that float32 runs to
+    float32 accuracy."""
+    from jmse_jax._otf import along_chord_order
+
     monkeypatch.setitem(jj.PRESETS["default"], "tiers", SMALL_TIERS)
     ab, field, u, _ = DESIGNS[1]
     vag = jax.jit(jax.value_and_grad(lambda a, f: jj.jmse(a, f, u, SIGNAL, NOISE)))
     value32, grad32 = vag(jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32), ab),
                           jnp.float32(field))
-    value64, grad64 = vag(jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float64), ab),
-                          jnp.float64(field))
-    # The oracle: the fixed grid the tier runs (its shortcut is refused on such coarse grids).
-    expected = _fixed(ab, field, u, _SMALL)
+    ab64 = jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float64), ab)
+    value64, _ = vag(ab64, jnp.float64(field))
+    # The oracle: the fixed grid the tier runs (its shortcut is refused on such coarse grids);
+    # in float32 the overlap engine takes 16 nodes along the chords for the grid's 10
+    # (``along_chord_order``), so float32's oracle is that grid in float64.
     assert value32.dtype == jnp.float32 and grad32.w020.dtype == jnp.float32
-    assert float(value64) == pytest.approx(expected, rel=1e-13)
-    assert float(value32) == pytest.approx(expected, rel=1e-5)
+    assert float(value64) == pytest.approx(_fixed(ab, field, u, _SMALL), rel=1e-13)
+    n_phi, n_t = _SMALL["overlap_nodes"]
+    grid32 = dict(_SMALL, overlap_nodes=(n_phi, along_chord_order(n_t, jnp.float32)))
+    assert grid32["overlap_nodes"] == (10, 16)
+    oracle = jax.jit(jax.value_and_grad(lambda a, f: jj.jmse(a, f, u, SIGNAL, NOISE, **grid32)))
+    expected, grad64 = oracle(ab64, jnp.float64(field))
+    assert float(value32) == pytest.approx(float(expected), rel=1e-5)
     for name in ("w020", "w040", "w131", "w222", "w220"):
         np.testing.assert_allclose(getattr(grad32, name), getattr(grad64, name),
-                                   rtol=1e-4, atol=1e-5 * expected)
+                                   rtol=1e-4, atol=1e-5 * float(expected))
 
 
 def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch):
@@ -383,6 +392,34 @@ def test_overlap_floor_sets_each_radial_panel_order(monkeypatch, overlap, floor,
                               overlap_nodes=overlap, overlap_floor=floor))(ab)
     assert {order for order, _ in orders} == expected
     assert sorted(count for _, count in orders) == [7, 7, 10]
+
+
+@pytest.mark.parametrize("dtype, expected", [
+    ("float64", {(12, 12), (14, 14), (20, 20)}),
+    ("float32", {(12, 16), (14, 16), (20, 24)}),
+])
+def test_float32_rounds_the_order_along_the_chords_to_a_multiple_of_8(monkeypatch, dtype,
+                                                                       expected):
+    """The engine's order along the chords (``_otf.along_chord_order``): as asked in
+    float64, rounded up to a multiple of 8 in float32 (the panel orders of
+    ``test_overlap_floor_sets_each_radial_panel_order``'s first case)."""
+    from jmse_jax import _otf
+
+    orders = set()
+    original = _otf._otf_overlap_flat
+
+    def spy(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype_):
+        orders.add((n_phi, n_t))
+        return original(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype_)
+
+    monkeypatch.setattr(_otf, "_otf_overlap_flat", spy)
+    ab, field, u, _ = DESIGNS[1]
+    ab = jax.tree.map(lambda c: jnp.asarray(c, dtype), ab)
+    value = jax.jit(lambda a: jj.jmse(a, jnp.asarray(field, dtype), jnp.asarray(u, dtype),
+                                      SIGNAL, NOISE, nodes=(24, 12), se_nodes=(96, 24),
+                                      overlap_nodes=(20, 20), overlap_floor=10))(ab)
+    assert value.dtype == jnp.dtype(dtype)
+    assert orders == expected
 
 
 def test_weak_tiers_floor_is_accurate_and_binds():
