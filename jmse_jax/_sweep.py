@@ -44,8 +44,9 @@ DEFAULT_ACCELERATOR_BATCH = 64
 #: most: each call from the host costs a fixed amount of host and runtime work (slicing and
 #: transferring the designs, passing the program's constants, setting up the call's scratch
 #: memory, collecting the results), which one ``jmse`` design (a few ms) does not hide.
-#: See ``sweep``.
-DEFAULT_CPU_CHUNKS = 8
+#: 16 since 2026-11-25 (was 8): as designs got cheaper the calls' fixed cost grew in
+#: proportion. See ``sweep``.
+DEFAULT_CPU_CHUNKS = 16
 
 #: Name of the mesh axis along which designs are sharded.
 MESH_AXIS = "designs"
@@ -453,12 +454,13 @@ def sweep(
         Chunks of ``batch_size`` designs each device works through (``lax.map``) per call
         from the host. The host loops over calls, updating the progress bar after each; more
         chunks per call means fewer round trips but coarser progress and more padding.
-        Default: on a CPU with ``batch_size=1``, ``DEFAULT_CPU_CHUNKS`` (8), or
-        ``n // 16`` for a batch of ``n < 128`` designs (at least 1), so that a small sweep is
+        Default: on a CPU with ``batch_size=1``, ``DEFAULT_CPU_CHUNKS`` (16), or
+        ``n // 16`` for a batch of ``n < 256`` designs (at least 1), so that a small sweep is
         not padded by much and still spreads over the ``workers``; otherwise 1. Each call
         costs a fixed amount of host and runtime work on top of its designs: on 2 cores the
         1875-design singlet value-and-gradient sweep with ``preset="fast"`` took 4.3-4.6 s
-        with 8 designs per call against 5.8-7.3 s with 1 (alternated runs, 2026-11-25;
+        with 8 designs per call against 5.8-7.3 s with 1 (alternated runs, 2026-11-25), and
+        later, in float32, 1.61-1.65 s with 16 against 1.78-1.91 s with 8 (same day;
         ``benchmarks/README.md``).
     devices : None, int or sequence of jax devices
         ``None``: every device JAX sees (all hosts); an int ``k``: the first ``k``.

@@ -159,11 +159,11 @@ def test_default_workers_on_cpu():
 
 
 @pytest.mark.parametrize("n, batch_size, chunks", [
-    (300, 1, 8), (128, 1, 8), (127, 1, 7), (40, 1, 2), (5, 1, 1), (300, 2, 1),
+    (300, 1, 16), (256, 1, 16), (255, 1, 15), (40, 1, 2), (5, 1, 1), (300, 2, 1),
 ])
 def test_default_chunks_per_call_on_cpu(n, batch_size, chunks):
-    """On a CPU with one design per chunk, a call works through up to 8 designs (n // 16 for
-    small batches); with a vmap it stays one chunk. The results do not change."""
+    """On a CPU with one design per chunk, a call works through up to 16 designs (n // 16
+    for small batches); with a vmap it stays one chunk. The results do not change."""
     x = np.linspace(0.0, 1.0, n)
     result = jj.sweep(lambda d: d["x"] ** 2 + 1.0, {"x": x}, batch_size=batch_size,
                       progress=False)
