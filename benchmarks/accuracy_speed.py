@@ -566,8 +566,9 @@ def pareto_plot(rows, path, floor=1e-16):
                 **style)
         if group in ("baseline", "preset", "engine", "baseline-float32"):
             for r, xi, yi in zip(members, x, y, strict=True):
+                below = "float32" in r["name"]  # beside its float64 twin: label it below
                 ax.annotate(r["name"].split(" ", 1)[1], (xi, yi), textcoords="offset points",
-                            xytext=(4, 4), fontsize=7)
+                            xytext=(4, -11 if below else 4), fontsize=7)
     # Pareto front: no other method is both faster and more accurate.
     points.sort()
     front, best = [], math.inf
