@@ -164,6 +164,25 @@ def test_sweep_writes_npz_and_json(capsys, tmp_path):
     assert np.asarray(result.value)[1] == pytest.approx(expected, rel=1e-10)
 
 
+def test_sweep_in_float32(capsys, tmp_path):
+    """``--dtype float32`` runs the whole sweep in float32: values (and the stored inputs)
+    are float32 and within 2e-6 of the float64 ones (the oracle: ``jmse`` in float64)."""
+    status, out, _ = run_cli(capsys, "sweep", "--axis", "w020=-1,1,3", "--w222", "0.5",
+                             "--field", "0.7", "--dtype", "float32", "--grad", "--quiet",
+                             "--out", str(tmp_path))
+    assert status == 0 and "float32" in out
+    result = jj.SweepResult.load(tmp_path / "sweep.npz")
+    assert result.ok.all() and np.asarray(result.value).dtype == np.float32
+    assert np.asarray(result.grad["aberrations"].w020).dtype == np.float32
+    assert result.metadata["user"]["dtype"] == "float32"
+    assert result.metadata["dtypes"] == ["float32"]
+    for i, w020 in enumerate((-1.0, 0.0, 1.0)):
+        expected = float(jj.jmse(jj.Seidel(w020=w020, w222=0.5), 0.7, 0.2,
+                                 jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3),
+                                 preset="fast"))
+        assert float(np.asarray(result.value)[i]) == pytest.approx(expected, rel=2e-6)
+
+
 def test_bench_builtin(capsys, tmp_path):
     out_json = tmp_path / "bench.json"
     status, out, _ = run_cli(capsys, "bench", "--builtin", "--repeats", "1",
