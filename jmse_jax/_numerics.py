@@ -29,6 +29,7 @@ __all__ = [
     "cos_sin_2pi_stacked",
     "gauss_legendre",
     "is_concrete",
+    "is_single_precision",
     "materialise",
     "runtime_one",
     "safe_arccos",
@@ -114,6 +115,12 @@ _SIN_PI_R_F32 = (
 )
 
 
+def is_single_precision(dtype) -> bool:
+    """Whether ``dtype`` is float32 or narrower: such computations take the float32 paths
+    (``cos_sin_2pi_stacked``'s shorter polynomial, ``_otf.along_chord_order``)."""
+    return jnp.finfo(dtype).bits <= 32
+
+
 def _even_poly(coefficients, z):
     result = jnp.full_like(z, coefficients[-1])
     for a in coefficients[-2::-1]:
@@ -163,7 +170,7 @@ def cos_sin_2pi_stacked(x):
     shift = jnp.asarray([[0.0], [0.25]], x.dtype)
     y = x[..., None, :] - shift
     r = y - jnp.round(y)
-    coefficients = _SIN_PI_R_F32 if jnp.finfo(x.dtype).bits <= 32 else _SIN_PI_R
+    coefficients = _SIN_PI_R_F32 if is_single_precision(x.dtype) else _SIN_PI_R
     s = _even_poly(coefficients, r * r) * r
     return 1.0 - 2.0 * (s * s)
 

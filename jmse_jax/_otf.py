@@ -48,6 +48,7 @@ from ._numerics import (
     cos_sin_2pi,
     cos_sin_2pi_stacked,
     gauss_legendre,
+    is_single_precision,
     materialise,
     safe_arccos,
     safe_norm,
@@ -263,7 +264,7 @@ def along_chord_order(n_t: int, dtype) -> int:
     of 4 and 8 are small (13-16 alike, 17-20 alike) and the order is kept as asked, so
     float64 results do not move.
     """
-    if jnp.finfo(dtype).bits <= 32:
+    if is_single_precision(dtype):
         return -(-n_t // 8) * 8
     return n_t
 
