@@ -65,7 +65,8 @@ class TierShortcut(NamedTuple):
     ``trial`` grid's error: on the calibration designs near the threshold the error was at
     most 5.6 times the difference, and a check closer to the trial failed together with it
     (benchmarks/README.md, "Adaptive default"). Above ``u_max`` the tier goes straight to
-    its own grid.
+    its own grid. The check is computed in float32 whatever the merit's dtype
+    (``_check_value``); the trial and the tier's grid in the merit's own.
     """
 
     trial: dict
@@ -624,6 +625,32 @@ def _accepts(trial, check, rtol):
     return jnp.abs(trial - check) <= rtol * jnp.abs(trial)
 
 
+#: The dtype in which a shortcut's check grid is computed, whatever the merit's dtype.
+_CHECK_DTYPE = jnp.dtype(jnp.float32)
+
+
+def _in_check_dtype(operands):
+    """``operands`` with every floating leaf cast to ``_CHECK_DTYPE``, without a gradient."""
+    def cast(x):
+        x = jnp.asarray(x)
+        return x.astype(_CHECK_DTYPE) if jnp.issubdtype(x.dtype, jnp.floating) else x
+
+    return jax.tree_util.tree_map(cast, jax.lax.stop_gradient(operands))
+
+
+def _check_value(check_grid, dtype, operands):
+    """A shortcut's check value, computed in float32 and returned in ``dtype``.
+
+    The check only decides whether the trial's value stands (``_accepts``, relative
+    tolerance 1e-5), and float32 moves it by far less than that: on the 212 calibration and
+    bank designs the shortcut serves, a median 3e-7 and no decision changed
+    (benchmarks/README.md, optimisation log). In float32 the check takes about 60 % of
+    its float64 time. It is never differentiated: only the trial's or the tier's own value
+    and gradient are returned.
+    """
+    return _apply_merit(check_grid, _CHECK_DTYPE, _in_check_dtype(operands)).astype(dtype)
+
+
 def _eligible(operands, u_max):
     """Whether a shortcut is tried for these operands (``u <= u_max``; batched if ``u`` is)."""
     return jax.lax.stop_gradient(operands[2]) <= u_max
@@ -734,7 +761,7 @@ def _batched_tier(plan, dtype, with_grad, mask, operands, zeros):
 
         def attempt(ops):
             trial = merit(trial_grid)(ops)
-            check = jax.vmap(functools.partial(_apply_merit, check_grid, dtype))(ops)
+            check = jax.vmap(functools.partial(_check_value, check_grid, dtype))(ops)
             value = trial if with_grad is None else trial[0]
             return trial, eligible & _accepts(value, check, rtol)
 
@@ -790,7 +817,7 @@ def _shortcut_attempt(shortcut, dtype, operands, with_grad):
 
     def attempt(ops):
         trial = trial_fn(ops)
-        check = _apply_merit(check_grid, dtype, ops)
+        check = _check_value(check_grid, dtype, ops)
         return trial, _accepts(trial if with_grad is None else trial[0], check, rtol)
 
     def skip(ops):
@@ -826,7 +853,8 @@ def _eager_tier_value(plan, dtype, operands):
         trial_grid, check_grid, rtol, u_max = shortcut
         if bool(_eligible(operands, u_max)):
             trial = _compiled_merit(_Static(trial_grid), dtype, operands)
-            check = _compiled_merit(_Static(check_grid), dtype, operands)
+            check = _compiled_merit(_Static(check_grid), _CHECK_DTYPE,
+                                    _in_check_dtype(operands)).astype(dtype)
             if bool(_accepts(trial, check, rtol)):
                 return trial
     return _compiled_merit(_Static(grid), dtype, operands)
@@ -901,9 +929,9 @@ def jmse(
         adaptive: the grid is chosen from ``aberration_strength`` (``DEFAULT_TIERS``), coarse
         for nearly diffraction-limited designs and finer for strongly aberrated ones, with
         ``lax.switch`` under ``jit`` (one tier runs). The middle tier first tries the first
-        tier's grid and keeps its value when a coarse check grid agrees with it to 1e-5
-        (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the band reaches
-        the cutoff): about half of that tier's designs, the paper's Fig. 1 point
+        tier's grid and keeps its value when a coarse check grid (computed in float32) agrees
+        with it to 1e-5 (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the
+        band reaches the cutoff): about half of that tier's designs, the paper's Fig. 1 point
         among them, then cost what the first tier costs, and the others pay the two cheap
         grids on top of their own. Under ``vmap`` a tier runs, for the whole batch, only
         if one of the batch's designs selects it (and a shortcut's own grid only if one

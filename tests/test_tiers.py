@@ -74,6 +74,16 @@ def _fixed(ab, field, u, grid):
     return float(jax.jit(lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **grid))(ab))
 
 
+def _to_float32(tree):
+    return jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32), tree)
+
+
+def _fixed32(ab, field, u, grid):
+    """``_fixed`` with every input in float32 (the whole computation in float32)."""
+    return float(jax.jit(lambda *args: jj.jmse(*args, **grid))(
+        *_to_float32((ab, field, u, SIGNAL, NOISE))))
+
+
 @pytest.mark.parametrize("ab, field, u, tier, path", [
     (*DESIGNS[0], "grid"), (*DESIGNS[1], "trial"), (*DEFOCUS_M6, "grid"), (*DESIGNS[2], "grid"),
     (*DESIGNS[3], "grid"),
@@ -86,8 +96,12 @@ def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
     _, _, grid, shortcut = jj.DEFAULT_TIERS[tier]
     if shortcut is not None:  # the rule, restated: keep the trial when the check agrees
         trial = _fixed(ab, field, u, shortcut.trial)
-        check = _fixed(ab, field, u, shortcut.check)
+        check = _fixed32(ab, field, u, shortcut.check)  # the check runs in float32
         accepted = u <= shortcut.u_max and abs(trial - check) <= shortcut.rtol * abs(trial)
+        # ... and decides as the float64 check would.
+        check64 = _fixed(ab, field, u, shortcut.check)
+        assert accepted == (u <= shortcut.u_max
+                            and abs(trial - check64) <= shortcut.rtol * abs(trial))
         assert path == ("trial" if accepted else "grid")
         if accepted:
             grid = shortcut.trial
@@ -105,6 +119,27 @@ def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
     # Forward mode: d/dt jmse(w020 + t) equals the reverse-mode gradient.
     _, tangent = _default_jvp_w020(ab, field, u)
     np.testing.assert_allclose(tangent, gradient.w020, rtol=1e-10)
+
+
+# Middle-tier designs without coma: the float32 computation starts from the same float32
+# coefficients whether the tilt is removed before or after the cast (coma's hidden tilt,
+# -2/3 w131, would round differently).
+@pytest.mark.parametrize("ab, field, u", [
+    (jj.Seidel(w020=-2.75, w040=1.5578, w222=1.4089, w220=2.7198), 0.95, 0.2), DEFOCUS_M6[:3],
+])
+def test_shortcut_check_runs_in_float32(ab, field, u):
+    """The shortcut's check is computed in float32 whatever the merit's dtype and returned
+    in that dtype: bit for bit the float32 computation, and within 1e-6 of the float64 one
+    (far inside the acceptance tolerance, 1e-5)."""
+    from jmse_jax._merit import _check_value
+
+    check = jj.DEFAULT_TIERS[1][3].check
+    operands = (ab.without_tilt(), jnp.float64(field), jnp.float64(u), SIGNAL, NOISE)
+    options = {**jj.jmse_options(), **check}  # as the tier's plan holds it
+    value = jax.jit(lambda ops: _check_value(options, jnp.dtype(jnp.float64), ops))(operands)
+    assert value.dtype == jnp.float64
+    assert float(value) == _fixed32(ab, field, u, check)
+    assert float(value) == pytest.approx(_fixed(ab, field, u, check), rel=1e-6)
 
 
 @pytest.mark.parametrize("ab, field, u, name", [
