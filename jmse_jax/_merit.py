@@ -646,7 +646,9 @@ def _check_value(check_grid, dtype, operands):
     bank designs the shortcut serves, a median 3e-7 and no decision changed
     (benchmarks/README.md, optimisation log). In float32 the check takes about 60 % of
     its float64 time. It is never differentiated: only the trial's or the tier's own value
-    and gradient are returned.
+    and gradient are returned. Spectra outside float32's range (``S_x S_n`` beyond about
+    1e38 or below 1e-45) make the check non-finite, which refuses the trial: the tier's own
+    grid, in the merit's dtype, then gives the value.
     """
     return _apply_merit(check_grid, _CHECK_DTYPE, _in_check_dtype(operands)).astype(dtype)
 

@@ -142,6 +142,25 @@ def test_shortcut_check_runs_in_float32(ab, field, u):
     assert float(value) == pytest.approx(_fixed(ab, field, u, check), rel=1e-6)
 
 
+@pytest.mark.parametrize("scale", [1e30, 1e-40])
+def test_shortcut_check_outside_float32_range_falls_back_to_the_tier_grid(scale):
+    """Spectra far outside float32's range (``S_x S_n`` overflows or underflows there): the
+    float32 check is not finite, so the trial is refused and the tier's own grid, in
+    float64, gives the value. The oracle is the JMSE's scale invariance, ``JMSE(a S_x,
+    a S_n) = a JMSE(S_x, S_n)``, against the tier's own grid at unit scale."""
+    ab, field, u, _ = DESIGNS[1]
+    signal = jj.MarkovSignal(scale * SIGNAL.variance, SIGNAL.correlation_length)
+    noise = jj.WhiteNoise(scale * NOISE.variance)
+    value, gradient = jax.jit(jax.value_and_grad(
+        lambda a: jj.jmse(a, field, u, signal, noise)))(ab)
+    expected, expected_grad = jax.jit(jax.value_and_grad(
+        lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **jj.DEFAULT_TIERS[1][2])))(ab)
+    assert float(value) == pytest.approx(scale * float(expected), rel=1e-12)
+    for name in ("w020", "w040", "w131", "w222", "w220"):
+        np.testing.assert_allclose(getattr(gradient, name),
+                                   scale * getattr(expected_grad, name), rtol=1e-9)
+
+
 @pytest.mark.parametrize("ab, field, u, name", [
     (*DESIGNS[1][:3], "fig1"), (jj.Seidel(w020=-6.0), 0.0, 0.2, "defocus_m6"),
 ])
