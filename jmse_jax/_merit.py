@@ -351,10 +351,13 @@ def _fine_parts(h, l_a, l_a_t, u, signal, noise, n_r, n_a, angles, dtype, adjoin
     # dS_e/dRe(H) + i dS_e/dIm(H) = -2 S_x^2 S_n H / D^2 = -2 (S_e S_x / D) H.
     weights = fine.row_weights[:, None, None] * fine.radial_weights
     coefficient = -2.0 * weights * s_e * s_x / denominator
-    g = coefficient[:, None] * h  # real and imaginary parts alike
     # l_a_t: l_a transposed in memory, so that the product has the layout YNNPACK takes.
-    back = jnp.matmul(l_a_t, g.reshape(size, -1), precision=EXACT)
-    return value, back.reshape(l_a_t.shape[0], 2, 2, n_r)
+    # One product per part, each taking its own same-shape product ``c * H``: one product
+    # of ``c`` broadcast over both parts cost a separate loop as long as a product
+    # (benchmarks/README.md, optimisation log).
+    back = [jnp.matmul(l_a_t, (coefficient * part).reshape(size, -1), precision=EXACT)
+            for part in (h_re, h_im)]
+    return value, jnp.stack(back, axis=1).reshape(l_a_t.shape[0], 2, 2, n_r)
 
 
 def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint):
