@@ -858,8 +858,7 @@ def _eager_tier_value(plan, dtype, operands):
         trial_grid, check_grid, rtol, u_max = shortcut
         if bool(_eligible(operands, u_max)):
             trial = _compiled_merit(_Static(trial_grid), dtype, operands)
-            check = _compiled_merit(_Static(check_grid), _CHECK_DTYPE,
-                                    _in_check_dtype(operands)).astype(dtype)
+            check = _compiled_check(_Static(check_grid), dtype, operands)
             if bool(_accepts(trial, check, rtol)):
                 return trial
     return _compiled_merit(_Static(grid), dtype, operands)
@@ -872,6 +871,14 @@ def _compiled_merit(grid, dtype, operands):
     primitive by primitive)."""
     aberrations, *rest = operands
     return _apply_merit(grid.value, dtype, (aberrations.without_tilt(), *rest))
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _compiled_check(grid, dtype, operands):
+    """``_check_value`` on the grid ``grid.value`` after removing the tilt (in ``dtype``,
+    before the cast, as under ``jit``), compiled once per grid, dtype and input structure."""
+    aberrations, *rest = operands
+    return _check_value(grid.value, dtype, (aberrations.without_tilt(), *rest))
 
 
 def _switched_merit_jvp(static, primals, tangents):

@@ -131,13 +131,16 @@ def test_shortcut_check_runs_in_float32(ab, field, u):
     """The shortcut's check is computed in float32 whatever the merit's dtype and returned
     in that dtype: bit for bit the float32 computation, and within 1e-6 of the float64 one
     (far inside the acceptance tolerance, 1e-5)."""
-    from jmse_jax._merit import _check_value
+    from jmse_jax._merit import _check_value, _compiled_check, _Static, _tier_plans
 
     check = jj.DEFAULT_TIERS[1][3].check
+    options = _tier_plans(jj.jmse_options(), jj.DEFAULT_TIERS)[1][1][1]  # the plan's check
+    float64 = jnp.dtype(jnp.float64)
     operands = (ab.without_tilt(), jnp.float64(field), jnp.float64(u), SIGNAL, NOISE)
-    options = {**jj.jmse_options(), **check}  # as the tier's plan holds it
-    value = jax.jit(lambda ops: _check_value(options, jnp.dtype(jnp.float64), ops))(operands)
+    value = jax.jit(lambda ops: _check_value(options, float64, ops))(operands)
     assert value.dtype == jnp.float64
+    # The eager path's check (tilt removed inside) is the traced path's, bit for bit.
+    assert float(_compiled_check(_Static(options), float64, (ab, *operands[1:]))) == float(value)
     assert float(value) == _fixed32(ab, field, u, check)
     assert float(value) == pytest.approx(_fixed(ab, field, u, check), rel=1e-6)
 
@@ -249,8 +252,7 @@ def test_float32_design_with_float64_spectra_differentiates(monkeypatch):
     monkeypatch.setitem(jj.PRESETS["default"], "tiers", SMALL_TIERS)
     ab, field, u, _ = DESIGNS[1]
     vag = jax.jit(jax.value_and_grad(lambda a, f: jj.jmse(a, f, u, SIGNAL, NOISE)))
-    value32, grad32 = vag(jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32), ab),
-                          jnp.float32(field))
+    value32, grad32 = vag(_to_float32(ab), jnp.float32(field))
     ab64 = jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float64), ab)
     value64, _ = vag(ab64, jnp.float64(field))
     # The oracle: the fixed grid the tier runs (its shortcut is refused on such coarse grids);
