@@ -1,19 +1,23 @@
-"""Re-check the middle tier's shortcut (``TierShortcut``) against stored references.
+"""Re-check the default's shortcuts (``TierShortcut``) against stored references.
 
-The shortcut keeps its trial grid's value when a coarse check grid agrees with it to
-``rtol``. This script evaluates, on the designs it serves (strength 1-5, ``u <= u_max``:
-the stored calibration designs of ``calibrate_tiers.py`` with references, and the bank's
-converged cases), the trial, the check in float64 and in float32 (as the default computes
-it), and the tier's own grid, and reports how many trials each check keeps, how many
-decisions the float32 check changes, and the worst error the tier returns. Candidate
-cheaper first trials (``--trial``) are tried as a first stage in front of the present one,
-with the same check: a kept candidate must stay accurate, i.e. not agree with the check
-while both are off.
+A shortcut tries cheaper grids before its tier's own: its ``first`` grid is kept when a
+coarse check grid (computed in float32) agrees with it to ``rtol`` and its own
+interpolation-error estimate is at most ``first_tol``; otherwise its ``trial`` grid (if
+any) is kept when the check agrees with it; otherwise the tier's own grid runs. This script
+evaluates, on the designs each shortcut serves (tier 0: strength <= 1 and u <= 0.5; tier 1:
+the rest of strength <= 5, for u <= ``u_max``; the stored calibration designs of
+``calibrate_tiers.py`` with references, and the bank's converged cases), every grid of the
+rule, and reports how many designs keep each grid, the worst error each kept grid has, the
+worst error the tier returns, how many decisions the float32 check changes, and what the
+check alone (without the estimate) would have kept of the first grid. Candidate first grids
+(``--first``) are tried in place of the present one, with the same check and ``first_tol``
+(``--first-tol``).
 
 Usage (from the repository root; ~3 min on 2 cores)::
 
     .venv/bin/python benchmarks/recheck_shortcut.py \\
-        [--trial "nodes=18,10 se_nodes=800,64 overlap_nodes=18,18 overlap_floor=12" ...]
+        [--first "nodes=18,8 se_nodes=300,40 overlap_nodes=18,14 overlap_floor=10" ...]
+        [--first-tol 1e-5]
 
 Prints its tables and writes ``results/recheck_shortcut.json`` and ``.md``.
 """
@@ -36,6 +40,7 @@ import recheck_tiers  # noqa: E402
 from problems import PROBLEMS  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
+from jmse_jax._merit import _compiled_estimated, _Static, _tier_index  # noqa: E402
 
 
 def _parse_grid(text: str) -> dict:
@@ -47,19 +52,23 @@ def _parse_grid(text: str) -> dict:
     return grid
 
 
-def _served(shortcut, bound):
-    """``(names, arguments, references)`` of the designs the shortcut serves."""
+def _served(tier):
+    """``(names, arguments, references)`` of the designs tier ``tier``'s shortcut serves."""
+    u_max = jj.DEFAULT_TIERS[tier][3].u_max
     names, args, refs = [], [], []
+
+    def serves(strength, u):
+        return int(_tier_index(strength, u, jj.DEFAULT_TIERS)) == tier and u <= u_max
+
     for d in recheck_tiers._designs():
-        if 1.0 < d["strength"] <= bound and d["u"] <= shortcut.u_max:
+        if serves(d["strength"], d["u"]):
             names.append(f"{d['source']} K={d['strength']:.2f} u={d['u']} noise={d['noise']:.1e}")
             args.append((jj.Seidel(**d["coefficients"]), d["field"], d["u"],
                          jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(d["noise"])))
             refs.append(d["reference"])
     for p in PROBLEMS:
         a = p.arguments()
-        if p.converged and a[2] <= shortcut.u_max and 1.0 < float(
-                jj.aberration_strength(a[0], a[1], a[2])) <= bound:
+        if p.converged and serves(float(jj.aberration_strength(a[0], a[1], a[2])), a[2]):
             names.append(f"bank {p.name}")
             args.append(a)
             refs.append(p.reference)
@@ -74,64 +83,92 @@ def _values(grid, args, float32=False):
     return np.asarray([float(fn(*a)) for a in args])
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--trial", nargs="*", default=[],
-                        help="candidate first trials, each 'key=a,b key=a,b ...'")
-    args_ = parser.parse_args()
-    bound, _, own_grid, shortcut = jj.DEFAULT_TIERS[1]
-    names, args, refs = _served(shortcut, bound)
-    trial = _values(shortcut.trial, args)
-    check64 = _values(shortcut.check, args)
-    check32 = _values(shortcut.check, args, float32=True)
-    own = _values(own_grid, args)
+def _estimates(grid, args):
+    """The first grid's error estimates (``_estimated_merit_value``), float64."""
+    options = _Static({**jj.jmse_options(), **grid})
+    out = []
+    for a in args:
+        ab, field, u, signal, noise = a
+        operands = (ab, jnp.float64(field), jnp.float64(u), signal, noise)
+        out.append(float(_compiled_estimated(options, jnp.dtype(jnp.float64), operands)[1]))
+    return np.asarray(out)
 
-    def kept(value, check):
+
+def _worst(errors, mask):
+    return float(np.max(errors[mask], initial=0.0))
+
+
+def _tier_report(tier, first_grid, first_tol, lines):
+    """The rule of tier ``tier``'s shortcut, with ``first_grid``, on the designs it serves."""
+    _, _, own_grid, shortcut = jj.DEFAULT_TIERS[tier]
+    names, args, refs = _served(tier)
+
+    def error(values):
+        return np.abs(values / refs - 1.0)
+
+    def agrees(value, check):
         return np.abs(value - check) <= shortcut.rtol * np.abs(value)
 
-    kept64, kept32 = kept(trial, check64), kept(trial, check32)
-    returned = np.where(kept32, trial, own)
-    errors = np.abs(returned / refs - 1.0)
-    spread = np.abs(check32 / check64 - 1.0)
-    report = dict(machine=common.machine_info(), designs=len(names), rtol=shortcut.rtol,
-                  kept_float64_check=int(kept64.sum()), kept_float32_check=int(kept32.sum()),
-                  decisions_changed=int(np.sum(kept64 != kept32)),
-                  check_float32_vs_float64=dict(median=float(np.median(spread)),
-                                                largest=float(spread.max())),
-                  worst_error=float(errors.max()),
-                  worst_kept_trial=float(np.max(np.abs(trial[kept32] / refs[kept32] - 1.0),
-                                                initial=0.0)),
-                  candidates=[])
-    lines = ["# The middle tier's shortcut re-checked", "",
-             f"{len(names)} designs (strength 1-{bound:g}, u <= {shortcut.u_max:.3f}; stored "
-             f"calibration designs and converged bank cases); commit "
-             f"{report['machine'].get('commit')}.", "",
-             f"- trials kept: {kept64.sum()} with the check in float64, {kept32.sum()} in "
-             f"float32; decisions changed: {report['decisions_changed']}",
-             f"- float32 check against float64: median {np.median(spread):.1e}, largest "
-             f"{spread.max():.1e} (relative)",
-             f"- worst error returned by the tier: {errors.max():.2e}; worst kept trial: "
-             f"{report['worst_kept_trial']:.2e}", ""]
-    if args_.trial:
-        lines += ["Candidate first trials in front of the present one (same check, float32):",
-                  "", "| candidate | kept | worst error | worst among kept | largest error / "
-                  "difference among kept | at |", "|---|---|---|---|---|---|"]
-    for text in args_.trial:
-        grid = _parse_grid(text)
-        first = _values(grid, args)
-        kept_first = kept(first, check32)
-        final = np.where(kept_first, first, returned)
-        final_errors = np.abs(final / refs - 1.0)
-        first_errors = np.abs(first / refs - 1.0)
-        difference = np.abs(first - check32) / np.abs(first)
-        ratio = first_errors[kept_first] / np.maximum(difference[kept_first], 1e-16)
-        worst = int(np.argmax(final_errors))
-        row = dict(grid=grid, kept=int(kept_first.sum()), worst=float(final_errors.max()),
-                   worst_kept=float(np.max(first_errors[kept_first], initial=0.0)),
-                   largest_ratio=float(np.max(ratio, initial=0.0)), at=names[worst])
-        report["candidates"].append(row)
-        lines.append(f"| {text} | {row['kept']}/{len(names)} | {row['worst']:.2e} | "
-                     f"{row['worst_kept']:.2e} | {row['largest_ratio']:.1f} | {row['at']} |")
+    check64 = _values(shortcut.check, args)
+    check32 = _values(shortcut.check, args, float32=True)
+    first = _values(first_grid, args)
+    estimate = _estimates(first_grid, args)
+    own = _values(own_grid, args)
+    keep_first = agrees(first, check32) & (estimate <= first_tol)
+    changed = int(np.sum(keep_first != (agrees(first, check64) & (estimate <= first_tol))))
+    returned = np.where(keep_first, first, own)
+    keep_trial = np.zeros(len(args), bool)
+    if shortcut.trial is not None:
+        trial = _values(shortcut.trial, args)
+        keep_trial = ~keep_first & agrees(trial, check32)
+        changed += int(np.sum(keep_trial != (~keep_first & agrees(trial, check64))))
+        returned = np.where(keep_trial, trial, returned)
+    check_alone = agrees(first, check32)
+    row = dict(tier=tier, designs=len(names), first=first_grid, first_tol=first_tol,
+               kept_first=int(keep_first.sum()), kept_trial=int(keep_trial.sum()),
+               own=int(len(names) - keep_first.sum() - keep_trial.sum()),
+               worst_returned=float(error(returned).max()),
+               at=names[int(np.argmax(error(returned)))],
+               worst_kept_first=_worst(error(first), keep_first),
+               worst_kept_trial=(_worst(error(trial), keep_trial)
+                                 if shortcut.trial is not None else None),
+               decisions_changed_by_float32=changed,
+               check_alone_kept_first=int(check_alone.sum()),
+               check_alone_worst_kept_first=_worst(error(first), check_alone))
+    trial_text = ("–" if row["worst_kept_trial"] is None
+                  else f"{row['kept_trial']} ({row['worst_kept_trial']:.1e})")
+    lines.append(f"| {tier} | {first_grid} | {len(names)} | {row['kept_first']} "
+                 f"({row['worst_kept_first']:.1e}) | {trial_text} | {row['own']} | "
+                 f"{row['worst_returned']:.2e} | {changed} | {row['check_alone_kept_first']} "
+                 f"({row['check_alone_worst_kept_first']:.1e}) |")
+    print(lines[-1], flush=True)
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--first", nargs="*", default=[],
+                        help="candidate first grids, each 'key=a,b key=a,b ...'")
+    parser.add_argument("--first-tol", type=float, default=None,
+                        help="error-estimate tolerance of the candidates (default: present)")
+    args_ = parser.parse_args()
+    report = dict(machine=common.machine_info(), rows=[])
+    lines = ["# The default's shortcuts re-checked", "",
+             f"Commit {report['machine'].get('commit')}. Designs: the stored calibration "
+             "designs and converged bank cases each shortcut serves. Each cell: designs that "
+             "keep the grid (the worst error among them); `check alone`: what the check "
+             "without the error estimate would keep of the first grid.", "",
+             "| tier | first grid | designs | first kept | trial kept | own grid | worst "
+             "returned | decisions float32 changed | check alone |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for tier, (_, _, _, shortcut) in enumerate(jj.DEFAULT_TIERS):
+        if shortcut is None or shortcut.first is None:
+            continue
+        candidates = [shortcut.first] + [_parse_grid(t) for t in args_.first]
+        tol = shortcut.first_tol if args_.first_tol is None else args_.first_tol
+        for i, grid in enumerate(candidates):
+            report["rows"].append(_tier_report(tier, grid, shortcut.first_tol if i == 0
+                                               else tol, lines))
     report["machine"]["load_at_end"] = common.load_average()
     print("\n".join(lines))
     common.write_json(common.RESULTS / "recheck_shortcut.json", report)

@@ -275,14 +275,63 @@ def polar_panels(u, n_radial: int, n_angular: int, dtype=None, n_outer: int | No
                        r, r_out, row_weights, t * w_t)
 
 
-def polar_interpolation_matrices(coarse: tuple[int, int], fine: tuple[int, int]):
+def polar_interpolation_matrices(coarse: tuple[int, int], fine: tuple[int, int],
+                                 drop: tuple[int, int] = (0, 0)):
     """Host matrices ``(L_radial, L_angular)`` taking polar-panel values from ``coarse``
     ``(n_radial, n_angular)`` Gauss nodes to ``fine`` ones (polynomial interpolation in ``t``
     and in the angle fraction, each on [0, 1]). ``L_angular`` is ``(rows, fine, coarse)``, one
     matrix per template row of the (split) angular rule (``split_interpolation``; row 0: the
-    plain Gauss rules)."""
-    return (_radial_interpolation(coarse[0], fine[0]),
-            split_interpolation(coarse[1], fine[1]))
+    plain Gauss rules).
+
+    ``drop = (d_r, d_a)`` lowers the interpolants' degree: on every panel (and part of a
+    split angular rule) the coarse values' top ``d`` Legendre coefficients are set to zero
+    before interpolating (``_lowered``). The difference between the merit on the lowered and
+    on the full interpolants estimates the full one's interpolation error (the error
+    estimate of ``TierShortcut.first``).
+    """
+    l_r = _radial_interpolation(coarse[0], fine[0])
+    l_a = split_interpolation(coarse[1], fine[1])
+    if drop[0]:
+        l_r = l_r @ _radial_lowering(coarse[0], drop[0])
+    if drop[1]:
+        l_a = np.einsum("rfc,rcd->rfd", l_a, _angular_lowering(coarse[1], drop[1]))
+    return l_r, l_a
+
+
+def _lowered(x, a: float, b: float, drop: int) -> np.ndarray:
+    """Matrix that removes the top ``drop`` Legendre coefficients of the polynomial through
+    values at the nodes ``x`` on ``[a, b]`` (the identity when ``drop >= len(x)``)."""
+    k = len(x)
+    if drop >= k:
+        return np.eye(k)
+    vander = np.polynomial.legendre.legvander((2.0 * np.asarray(x) - a - b) / (b - a), k - 1)
+    return vander[:, :k - drop] @ np.linalg.inv(vander)[:k - drop, :]
+
+
+@functools.cache
+def _radial_lowering(n: int, drop: int) -> np.ndarray:
+    """Block-diagonal ``_lowered`` over the radial panels of the rule of ``n`` nodes."""
+    out = np.zeros((n, n))
+    start = 0
+    for (a, b), k in zip(_radial_panels(), _radial_counts(n), strict=True):
+        x, _ = gauss_legendre(k, a, b)
+        out[start:start + k, start:start + k] = _lowered(x, a, b, drop)
+        start += k
+    return out
+
+
+@functools.cache
+def _angular_lowering(n: int, drop: int) -> np.ndarray:
+    """``_lowered`` for each template row of the angular rule of ``n`` nodes, per part,
+    ``(rows, n, n)``."""
+    local, _, second = angular_templates(n)
+    out = np.zeros((len(local), n, n))
+    for row in range(len(local)):
+        for part in (False, True):
+            i = np.flatnonzero(second[row] == part)
+            if len(i):
+                out[row][np.ix_(i, i)] = _lowered(local[row][i], 0.0, 1.0, drop)
+    return out
 
 
 def frequency_quadrature(rule: str, u, p, dtype=None):

@@ -160,3 +160,41 @@ def test_split_angular_rule(u):
 def test_bad_rule_or_count_raises(rule, p, match):
     with pytest.raises(ValueError, match=match):
         frequency_quadrature(rule, 0.2, p)
+
+
+@pytest.mark.parametrize("coarse, fine, drop", [((18, 10), (300, 40), (1, 0)),
+                                                ((18, 10), (300, 40), (0, 1)),
+                                                ((24, 12), (60, 20), (2, 2))])
+def test_lowered_interpolation_drops_the_top_legendre_degrees(coarse, fine, drop):
+    """``polar_interpolation_matrices(..., drop)``: on each radial panel (and angular rule)
+    a polynomial of degree below ``k - d`` at the coarse nodes is interpolated exactly, as
+    by the full matrices, and the top Legendre polynomial ``P_{k-1}`` is interpolated as
+    zero (``d >= 1``). Oracle: NumPy's Legendre polynomials on the panels' Gauss nodes."""
+    from numpy.polynomial import legendre
+
+    from jmse_jax._numerics import gauss_legendre
+    from jmse_jax._quadrature import (
+        _radial_counts,
+        _radial_panels,
+        angular_templates,
+        polar_interpolation_matrices,
+    )
+
+    full_r, full_a = polar_interpolation_matrices(coarse, fine)
+    low_r, low_a = polar_interpolation_matrices(coarse, fine, drop)
+    start = 0
+    for (a, b), k in zip(_radial_panels(), _radial_counts(coarse[0]), strict=True):
+        x, _ = gauss_legendre(k, a, b)
+        s = (2 * x - a - b) / (b - a)
+        for degree, kept in ((k - 1 - drop[0], True), (k - 1, drop[0] == 0)):
+            values = np.zeros(coarse[0])
+            values[start:start + k] = legendre.legval(s, np.eye(k)[degree])
+            expected = full_r @ values if kept else np.zeros(fine[0])
+            np.testing.assert_allclose(low_r @ values, expected, atol=1e-9)
+        start += k
+    x = angular_templates(coarse[1])[0][0]  # the plain angular rule's nodes on [0, 1]
+    k = coarse[1]
+    for degree, kept in ((k - 1 - drop[1], True), (k - 1, drop[1] == 0)):
+        values = legendre.legval(2 * x - 1, np.eye(k)[degree])
+        expected = full_a[0] @ values if kept else np.zeros(fine[1])
+        np.testing.assert_allclose(low_a[0] @ values, expected, atol=1e-9)
