@@ -390,7 +390,7 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(
     Blocks of angular rows (``_fine_blocks``) run one after another. With ``adjoint``, also
     returns ``G = L_r^T (sum_blocks L_a^T g)``: the coarse-sized gradient of the total with
     respect to ``Re(H_coarse)`` + i ``Im(H_coarse)``. ``drop`` lowers the interpolants'
-    degree (``polar_interpolation_matrices``; for ``_estimated_merit``).
+    degree (``polar_interpolation_matrices``; for ``_interpolation_estimate``).
     """
     l_r, l_a_rows = polar_interpolation_matrices(coarse, fine, drop)
     n_r, n_a = fine
@@ -495,10 +495,15 @@ def _fine_stage_jvp(coarse, fine, dtype, primals, tangents):
 _fine_stage.defjvp(_fine_stage_jvp, symbolic_zeros=True)
 
 
-def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror):
-    """``\\iint_band S_e`` over the folded first quadrant (``mirror``: the x-mirrored one)."""
+def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror,
+                   estimate=False):
+    """``\\iint_band S_e`` over the folded first quadrant (``mirror``: the x-mirrored one);
+    with ``estimate``, also its ``_interpolation_estimate``."""
     sign = -1.0 if mirror else 1.0
-    if options["quadrature"] == "polar":
+    polar = options["quadrature"] == "polar"
+    if estimate and not (polar and options["se_nodes"] is not None):
+        raise ValueError("an estimated grid needs the polar rule with se_nodes")
+    if polar:
         coarse = polar_panels(u, *options["nodes"], dtype)
         h = _polar_otf(aberrations, sign * coarse.nu_x, coarse.nu_y, field, options)
         if options["se_nodes"] is None:
@@ -506,30 +511,29 @@ def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror)
                                          noise(coarse.nu_x, coarse.nu_y))
             s_x_out = signal(coarse.outer_nu_x, coarse.outer_nu_y)  # H = 0 past the cutoff
             return jnp.sum(coarse.weights * s_e) + jnp.sum(coarse.outer_weights * s_x_out)
-        return _fine_stage(h, u, signal, noise, options["nodes"], options["se_nodes"], dtype)
+        total = _fine_stage(h, u, signal, noise, options["nodes"], options["se_nodes"], dtype)
+        if estimate:
+            return total, _interpolation_estimate(h, u, signal, noise, total, options, dtype)
+        return total
     nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
     h = _otf_at(aberrations, sign * nu_x, nu_y, field, options)
     s_e = error_spectral_density(h, signal(nu_x, nu_y), noise(nu_x, nu_y))
     return jnp.sum(w * s_e)
 
 
-def _estimated_band_integral(aberrations, field, u, signal, noise, options, dtype, mirror):
-    """``_band_integral`` on a polar grid with a fine S_e stage, and an estimate of its
-    interpolation error: the largest relative change of the total when the OTF's
-    interpolants from the coarse nodes lose their top Legendre coefficient, radially or
-    angularly (``_ESTIMATE_DROP``; no gradient)."""
-    sign = -1.0 if mirror else 1.0
-    coarse = polar_panels(u, *options["nodes"], dtype)
-    h = _polar_otf(aberrations, sign * coarse.nu_x, coarse.nu_y, field, options)
+def _interpolation_estimate(h, u, signal, noise, total, options, dtype):
+    """Estimate of the fine S_e stage's interpolation error, relative to its ``total``: the
+    largest change of the total when the OTF's interpolants from the coarse nodes ``h`` lose
+    their top Legendre coefficient, radially or angularly (``_ESTIMATE_DROP``; no
+    gradient)."""
     nodes, se_nodes = options["nodes"], options["se_nodes"]
-    total = _fine_stage(h, u, signal, noise, nodes, se_nodes, dtype)
-    frozen = jax.lax.stop_gradient((h, u, signal, noise, total))
-    change = [jnp.abs(_fine_total(*frozen[:4], nodes, se_nodes, dtype, False, drop) - frozen[4])
-              for drop in _ESTIMATE_DROP]
-    return total, functools.reduce(jnp.maximum, change) / jnp.abs(frozen[4])
+    h, u, signal, noise, total = jax.lax.stop_gradient((h, u, signal, noise, total))
+    change = [jnp.abs(_fine_total(h, u, signal, noise, nodes, se_nodes, dtype, False, drop)
+                      - total) for drop in _ESTIMATE_DROP]
+    return functools.reduce(jnp.maximum, change) / jnp.abs(total)
 
 
-#: The lowered interpolants of ``_estimated_band_integral``: one Legendre degree fewer in
+#: The lowered interpolants of ``_interpolation_estimate``: one Legendre degree fewer in
 #: the radial, then in the angular direction. On the calibration designs a drop of 2
 #: overestimated the error about 100-fold (the paper's Fig. 1 point: 5e-5 against 2.4e-7)
 #: and refused most trials (benchmarks/README.md, optimisation log).
@@ -537,19 +541,10 @@ _ESTIMATE_DROP = ((1, 0), (0, 1))
 
 
 def _estimated_merit_value(options, dtype, aberrations, field, u, signal, noise):
-    """``(merit, estimate)``: ``_merit_value`` on a polar grid with a fine S_e stage and the
-    relative error estimate of ``_estimated_band_integral`` (the larger of the two halves'
-    for a wavefront that is not even in x)."""
-    if not (options["quadrature"] == "polar" and options["se_nodes"] is not None
-            and not options.get("_radial")):
+    """``(merit, estimate)``: ``_merit_value`` with its interpolation-error estimate."""
+    if options.get("_radial"):
         raise ValueError("an estimated grid needs the polar rule with se_nodes")
-    total, estimate = _estimated_band_integral(aberrations, field, u, signal, noise, options,
-                                               dtype, mirror=False)
-    if not aberrations.x_symmetric:
-        mirrored, other = _estimated_band_integral(aberrations, field, u, signal, noise,
-                                                   options, dtype, True)
-        total, estimate = 0.5 * (total + mirrored), jnp.maximum(estimate, other)
-    return total / (2.0 * math.pi), estimate
+    return _merit_value(options, dtype, aberrations, field, u, signal, noise, estimate=True)
 
 
 #: Pupil points (radii x angles) on which ``aberration_strength`` samples the wavefront slope.
@@ -609,14 +604,25 @@ def _tier_index(strength, u, tiers):
     return index
 
 
-def _merit_value(options, dtype, aberrations, field, u, signal, noise):
+def _merit_value(options, dtype, aberrations, field, u, signal, noise, estimate=False):
+    """The merit on the grid of ``options``; with ``estimate``, ``(merit, estimate)`` with
+    the relative interpolation-error estimate of ``_interpolation_estimate`` (the larger of
+    the two halves' for a wavefront that is not even in x; a polar grid with a fine S_e
+    stage only)."""
     if options.get("_radial"):  # a plan for rotationally symmetric designs (see jmse)
         total = radial_band_integral(aberrations, field, u, signal, noise, options, dtype)
         return total / (2.0 * math.pi)
-    total = _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror=False)
+    band = functools.partial(_band_integral, aberrations, field, u, signal, noise, options,
+                             dtype, estimate=estimate)
+    total = band(mirror=False)
     if not aberrations.x_symmetric:
-        mirrored = _band_integral(aberrations, field, u, signal, noise, options, dtype, True)
+        mirrored = band(mirror=True)
+        if estimate:
+            return (0.5 * (total[0] + mirrored[0]) / (2.0 * math.pi),
+                    jnp.maximum(total[1], mirrored[1]))
         total = 0.5 * (total + mirrored)
+    if estimate:
+        return total[0] / (2.0 * math.pi), total[1]
     return total / (2.0 * math.pi)
 
 
