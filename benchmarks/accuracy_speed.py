@@ -245,14 +245,14 @@ def measure(method: Method, cases, timing_case, settings) -> dict:
 def default_by_tier(cases) -> dict:
     """Warm time of the adaptive default's value and value_and_grad on every bank case,
     grouped by the tier its ``aberration_strength`` selects and, in a tier with a shortcut
-    (``TierShortcut``), by whether the trial grid was kept (the headline times use Fig. 1
-    only, which lies in tier 1). Rotationally symmetric cases run one of the default's
-    one-ray plans instead (``jmse_jax._radial``), grouped by that plan."""
-    from jmse_jax._merit import _accepts, _radial_plans, _tier_index, _tier_plans
+    (``TierShortcut``), by the grid the shortcut's rule keeps (its ``first`` or ``trial``
+    grid, or the tier's own; the headline times use Fig. 1 only, which lies in tier 1).
+    Rotationally symmetric cases run one of the default's one-ray plans instead
+    (``jmse_jax._radial``), grouped by that plan."""
+    from jmse_jax._merit import _radial_plans, _route, _tier_plans
     from jmse_jax._radial import radial_counts
 
     _, split = _radial_plans(_tier_plans(jj.jmse_options(), jj.DEFAULT_TIERS))
-    one_ray = common._import_problems().runs_one_ray
 
     value_fn = _jmse()
     vag_fn = jax.value_and_grad(value_fn, argnums=0)
@@ -260,10 +260,11 @@ def default_by_tier(cases) -> dict:
     for case in cases:
         ab, field, u = case.arguments[:3]
         strength = float(jj.aberration_strength(ab, field, u))
-        tier = int(_tier_index(strength, u, jj.DEFAULT_TIERS))
+        route = _route(*case.arguments)
+        tier = route["tier"]
         _, _, grid, shortcut = jj.DEFAULT_TIERS[tier]
         group = str(tier)
-        if one_ray(case.arguments):
+        if route["one_ray"]:
             last = split - 1 if tier < split else len(jj.DEFAULT_TIERS) - 1
             first = 0 if tier < split else split
             ray = jj.DEFAULT_TIERS[last][2]
@@ -272,13 +273,10 @@ def default_by_tier(cases) -> dict:
             grid = dict(description=(
                 f"radii {counts[0]} + {counts[1]} (OTF), {counts[2]} + {counts[3]} (S_e), "
                 f"overlap {tuple(ray['overlap_nodes'])}"))
-            shortcut = None
-        if shortcut is not None:  # which grid the shortcut's rule returns
-            trial, check = (float(jax.jit(_jmse(**g))(*case.arguments))
-                            for g in (shortcut.trial, shortcut.check))
-            kept = bool(_accepts(trial, check, shortcut.rtol))
-            group = f"{tier}, trial kept" if kept else f"{tier}, own grid"
-            grid = shortcut.trial if kept else grid
+        elif shortcut is not None:  # which grid the shortcut's rule returns
+            path = route["path"]
+            group = f"{tier}, {'own grid' if path == 'grid' else path + ' grid kept'}"
+            grid = {"first": shortcut.first, "trial": shortcut.trial}.get(path, grid)
         grids[group] = grid
         value = common.time_compiled(value_fn, case.arguments, budget_s=0.3, max_repeats=5)
         vag = common.time_compiled(vag_fn, case.arguments, budget_s=0.3, max_repeats=5)
@@ -495,9 +493,11 @@ def markdown(report) -> str:
     if tiered:
         lines += ["## The adaptive default by tier", "",
                   "The default picks its grid from `aberration_strength` (`DEFAULT_TIERS`); "
-                  "tier 1 first tries tier 0's grid and keeps it when a coarse check grid "
-                  "agrees (`TierShortcut`; a refused trial costs its own and the check's "
-                  "time on top of the tier's grid). The headline times are those of Fig. 1 "
+                  "tiers 0 and 1 (for u <= 1/sqrt(2)) first try a cheaper grid and keep it "
+                  "when a coarse float32 check grid agrees to 1e-5 and the grid's own "
+                  "interpolation-error estimate is <= 1e-5 (`TierShortcut`; a refused "
+                  "first grid costs its own, the estimate's and the check's time on top of "
+                  "the tier's grid). The headline times are those of Fig. 1 "
                   "(tier 1). Rotationally symmetric cases run one of the two one-ray plans "
                   "(`jmse_jax/_radial.py`; radii on [0, min(u, 1)] + [u, sqrt(2) u]). "
                   "Every bank case:", "",

@@ -17,7 +17,7 @@ Usage (from the repository root; ~3 min on 2 cores)::
 
     .venv/bin/python benchmarks/recheck_shortcut.py \\
         [--first "nodes=18,8 se_nodes=300,40 overlap_nodes=18,14 overlap_floor=10" ...]
-        [--first-tol 1e-5]
+        [--first-tol 1e-5] [--check "nodes=16,8 se_nodes=160,24 overlap_nodes=14,12" ...]
 
 Prints its tables and writes ``results/recheck_shortcut.json`` and ``.md``.
 """
@@ -98,9 +98,11 @@ def _worst(errors, mask):
     return float(np.max(errors[mask], initial=0.0))
 
 
-def _tier_report(tier, first_grid, first_tol, lines):
-    """The rule of tier ``tier``'s shortcut, with ``first_grid``, on the designs it serves."""
+def _tier_report(tier, first_grid, first_tol, lines, check_grid=None):
+    """The rule of tier ``tier``'s shortcut, with ``first_grid`` (and ``check_grid`` in place
+    of its check, if given), on the designs it serves."""
     _, _, own_grid, shortcut = jj.DEFAULT_TIERS[tier]
+    check_grid = shortcut.check if check_grid is None else check_grid
     names, args, refs = _served(tier)
 
     def error(values):
@@ -109,8 +111,8 @@ def _tier_report(tier, first_grid, first_tol, lines):
     def agrees(value, check):
         return np.abs(value - check) <= shortcut.rtol * np.abs(value)
 
-    check64 = _values(shortcut.check, args)
-    check32 = _values(shortcut.check, args, float32=True)
+    check64 = _values(check_grid, args)
+    check32 = _values(check_grid, args, float32=True)
     first = _values(first_grid, args)
     estimate = _estimates(first_grid, args)
     own = _values(own_grid, args)
@@ -124,7 +126,9 @@ def _tier_report(tier, first_grid, first_tol, lines):
         changed += int(np.sum(keep_trial != (~keep_first & agrees(trial, check64))))
         returned = np.where(keep_trial, trial, returned)
     check_alone = agrees(first, check32)
+    estimate_alone = estimate <= first_tol
     row = dict(tier=tier, designs=len(names), first=first_grid, first_tol=first_tol,
+               check=check_grid,
                kept_first=int(keep_first.sum()), kept_trial=int(keep_trial.sum()),
                own=int(len(names) - keep_first.sum() - keep_trial.sum()),
                worst_returned=float(error(returned).max()),
@@ -134,13 +138,21 @@ def _tier_report(tier, first_grid, first_tol, lines):
                                  if shortcut.trial is not None else None),
                decisions_changed_by_float32=changed,
                check_alone_kept_first=int(check_alone.sum()),
-               check_alone_worst_kept_first=_worst(error(first), check_alone))
+               check_alone_worst_kept_first=_worst(error(first), check_alone),
+               estimate_alone_kept_first=int(estimate_alone.sum()),
+               estimate_alone_worst_kept_first=_worst(error(first), estimate_alone),
+               worst_first_error=float(error(first).max()),
+               worst_first_estimate_ratio=float(np.max(error(first) / np.maximum(
+                   estimate, 1e-300))))
     trial_text = ("–" if row["worst_kept_trial"] is None
                   else f"{row['kept_trial']} ({row['worst_kept_trial']:.1e})")
-    lines.append(f"| {tier} | {first_grid} | {len(names)} | {row['kept_first']} "
+    check_text = "" if check_grid == shortcut.check else f"; check {check_grid}"
+    lines.append(f"| {tier} | {first_grid}{check_text} | {len(names)} | {row['kept_first']} "
                  f"({row['worst_kept_first']:.1e}) | {trial_text} | {row['own']} | "
                  f"{row['worst_returned']:.2e} | {changed} | {row['check_alone_kept_first']} "
-                 f"({row['check_alone_worst_kept_first']:.1e}) |")
+                 f"({row['check_alone_worst_kept_first']:.1e}) | "
+                 f"{row['estimate_alone_kept_first']} "
+                 f"({row['estimate_alone_worst_kept_first']:.1e}) |")
     print(lines[-1], flush=True)
     return row
 
@@ -151,16 +163,21 @@ def main() -> None:
                         help="candidate first grids, each 'key=a,b key=a,b ...'")
     parser.add_argument("--first-tol", type=float, default=None,
                         help="error-estimate tolerance of the candidates (default: present)")
+    parser.add_argument("--check", nargs="*", default=[],
+                        help="candidate check grids (with the present first grid)")
     args_ = parser.parse_args()
     report = dict(machine=common.machine_info(), rows=[])
-    lines = ["# The default's shortcuts re-checked", "",
+    command = " ".join(["python benchmarks/recheck_shortcut.py",
+                        *(f'"{a}"' if " " in a else a for a in sys.argv[1:])])
+    lines = ["# The default's shortcuts re-checked", "", f"`{command}`", "",
              f"Commit {report['machine'].get('commit')}. Designs: the stored calibration "
              "designs and converged bank cases each shortcut serves. Each cell: designs that "
-             "keep the grid (the worst error among them); `check alone`: what the check "
-             "without the error estimate would keep of the first grid.", "",
+             "keep the grid (the worst error among them); `check alone` and `estimate "
+             "alone`: what the check without the error estimate, and the estimate without "
+             "the check, would keep of the first grid.", "",
              "| tier | first grid | designs | first kept | trial kept | own grid | worst "
-             "returned | decisions float32 changed | check alone |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "returned | decisions float32 changed | check alone | estimate alone |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for tier, (_, _, _, shortcut) in enumerate(jj.DEFAULT_TIERS):
         if shortcut is None or shortcut.first is None:
             continue
@@ -169,6 +186,9 @@ def main() -> None:
         for i, grid in enumerate(candidates):
             report["rows"].append(_tier_report(tier, grid, shortcut.first_tol if i == 0
                                                else tol, lines))
+        for text in args_.check:
+            report["rows"].append(_tier_report(tier, shortcut.first, shortcut.first_tol,
+                                               lines, check_grid=_parse_grid(text)))
     report["machine"]["load_at_end"] = common.load_average()
     print("\n".join(lines))
     common.write_json(common.RESULTS / "recheck_shortcut.json", report)

@@ -987,8 +987,10 @@ def _tier_value_and_grad(plan, dtype, wrt, operands):
     return jax.lax.cond(accepted, lambda ops: trial, full, operands)
 
 
-def _eager_tier_value(plan, dtype, operands):
-    """``_tier_value`` for concrete inputs: only the grids needed are compiled and run."""
+def _eager_tier_choice(plan, dtype, operands):
+    """``_tier_value`` for concrete inputs, where only the grids needed are compiled and
+    run, as ``(value, path)``: ``path`` names the grid that gave the value, ``"first"`` or
+    ``"trial"`` (a shortcut's grid kept) or ``"grid"`` (the plan's own)."""
     grid, shortcut = plan
     if shortcut is not None:
         trial_grid, check_grid, rtol, u_max, first_grid, first_tol = shortcut
@@ -997,12 +999,12 @@ def _eager_tier_value(plan, dtype, operands):
             if first_grid is not None:
                 first, estimate = _compiled_estimated(_Static(first_grid), dtype, operands)
                 if bool(_accepts(first, check, rtol) & (estimate <= first_tol)):
-                    return first
+                    return first, "first"
             if trial_grid is not None:
                 trial = _compiled_merit(_Static(trial_grid), dtype, operands)
                 if bool(_accepts(trial, check, rtol)):
-                    return trial
-    return _compiled_merit(_Static(grid), dtype, operands)
+                    return trial, "trial"
+    return _compiled_merit(_Static(grid), dtype, operands), "grid"
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1))
@@ -1160,19 +1162,37 @@ def jmse(
     >>> round(float(value), 9)  # the converged value is 2.6539432e-3
     0.002653942
     """
-    options = jmse_options(
-        preset, quadrature=quadrature, nodes=nodes, se_nodes=se_nodes, otf_method=otf_method,
-        overlap_nodes=overlap_nodes, overlap_floor=overlap_floor, B=B,
-    )
-    _validate(aberrations, field, u, signal, noise)
-    dtype = common_dtype(aberrations, field, u, signal, noise)
+    static, inputs = _prepare(
+        (aberrations, field, u, signal, noise),
+        jmse_options(preset, quadrature=quadrature, nodes=nodes, se_nodes=se_nodes,
+                     otf_method=otf_method, overlap_nodes=overlap_nodes,
+                     overlap_floor=overlap_floor, B=B))
+    if is_concrete(inputs):
+        return _concrete_merit(static, inputs)[0]
+    return _traced_merit(static, inputs)
+
+
+def _prepare(arguments, options):
+    """``(static, inputs)`` of ``jmse`` for validated ``arguments`` and resolved options."""
+    _validate(*arguments)
+    aberrations, field, u, signal, noise = arguments
+    dtype = common_dtype(*arguments)
     inputs = (aberrations, jnp.asarray(field, dtype), jnp.asarray(u, dtype), signal, noise)
+    options = dict(options)
     tiers = options.pop("tiers")
     radial = options.pop("radial") and _radial_applies(options, signal, noise)
-    static = _Static((options, tiers, radial, dtype))
-    if is_concrete(inputs):
-        return _concrete_merit(static, inputs)
-    return _traced_merit(static, inputs)
+    return _Static((options, tiers, radial, dtype)), inputs
+
+
+def _route(aberrations, field, u, signal, noise, **options):
+    """Which plan ``jmse`` (with these options) takes for a concrete design, as a dict:
+    ``tier`` (index into the tiers, None without tiers), ``one_ray`` (a one-ray plan runs,
+    ``jmse_jax._radial``) and ``path`` (the shortcut's ``"first"`` or ``"trial"`` grid, or
+    the plan's own ``"grid"``); and the ``value`` it returns. For the benchmarks."""
+    static, inputs = _prepare((aberrations, field, u, signal, noise), jmse_options(**options))
+    value, index, symmetric, path = _concrete_merit(static, inputs)
+    tier = None if static.value[1] is None else index
+    return dict(tier=tier, one_ray=symmetric, path=path, value=value)
 
 
 def _base_plans(static):
@@ -1243,14 +1263,17 @@ def _concrete_choice(static, aberrations, field, u):
 
 def _concrete_merit(static, inputs):
     """``jmse`` after validation, for concrete inputs: the plan this design takes is chosen
-    first, and only the grids it needs are compiled (each once per process) and run."""
+    first, and only the grids it needs are compiled (each once per process) and run.
+    Returns ``(value, tier index, one-ray plan taken, path)`` (``_eager_tier_choice``)."""
     dtype = static.value[3]
     plans = _base_plans(static)
     index, symmetric = (int(x) for x in _concrete_choice(static, *inputs[:3]))
+    plan = plans[index]
     if symmetric:
         radial_plans, split = _radial_plans(plans)
-        plans, index = radial_plans, int(len(radial_plans) > 1 and index >= split)
-    return _eager_tier_value(plans[index], dtype, inputs)
+        plan = radial_plans[int(len(radial_plans) > 1 and index >= split)]
+    value, path = _eager_tier_choice(plan, dtype, inputs)
+    return value, index, bool(symmetric), path
 
 
 def baseline_jmse(aberrations, field, u, signal, noise, B: int = 64):

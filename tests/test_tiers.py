@@ -12,7 +12,7 @@ from compiled import assert_vmap_matches_singles, jmse_fn
 from problems import REFERENCES
 
 import jmse_jax as jj
-from jmse_jax._merit import _strength, _tier_index
+from jmse_jax._merit import _route, _strength, _tier_index
 
 SIGNAL, NOISE = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
 
@@ -128,6 +128,9 @@ def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
             if accepted:
                 taken, grid = "trial", shortcut.trial
     assert path == taken
+    # The benchmarks' report of the plan taken (``_route``) names the same tier and grid.
+    route = _route(ab, field, u, SIGNAL, NOISE)
+    assert (route["tier"], route["path"], route["one_ray"]) == (tier, taken, False)
     expected, expected_grad = jax.jit(jax.value_and_grad(
         lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **grid)))(ab)
     eager = jj.jmse(ab, field, u, SIGNAL, NOISE)
@@ -593,3 +596,18 @@ def test_weak_tiers_floor_is_accurate_and_binds():
         full = float(jj.jmse(ab, field, u, SIGNAL, NOISE,
                              **dict(grid, overlap_floor=max(grid["overlap_nodes"]))))
         assert abs(reduced - full) <= 1e-7 * full, (tier, reduced, full)
+
+
+def test_route_reports_the_one_ray_plan_and_fixed_grids():
+    """``_route`` (the benchmarks' report of the plan ``jmse`` takes): a rotationally
+    symmetric design runs a one-ray plan, an explicit grid has no tier; the value it
+    returns is ``jmse``'s."""
+    ab = jj.Seidel(w020=-1.5, w040=0.8)
+    route = _route(ab, 0.0, 0.2, SIGNAL, NOISE)
+    tier = int(_tier_index(float(jj.aberration_strength(ab, 0.0, 0.2)), 0.2, jj.DEFAULT_TIERS))
+    assert route["one_ray"] and route["path"] == "grid" and route["tier"] == tier
+    assert float(route["value"]) == float(jj.jmse(ab, 0.0, 0.2, SIGNAL, NOISE))
+    grid = dict(nodes=(16, 8), se_nodes=(64, 16), overlap_nodes=(12, 12))
+    fixed = _route(*DESIGNS[0][:3], SIGNAL, NOISE, **grid)
+    assert (fixed["tier"], fixed["path"], fixed["one_ray"]) == (None, "grid", False)
+    assert float(fixed["value"]) == float(jj.jmse(*DESIGNS[0][:3], SIGNAL, NOISE, **grid))
