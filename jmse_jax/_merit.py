@@ -1095,11 +1095,12 @@ def jmse(
         agrees with it to 1e-5 and its own interpolation-error estimate is below 1e-5
         (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the band reaches
         the cutoff): about half of the middle tier's designs and nine in ten of the first's,
-        the paper's Fig. 1 point among them, then cost that grid and the check (about twice
-        ``baseline_jmse`` at ``B = 64``), and the others pay the two cheap grids on top of
-        their own. Under ``vmap`` a tier runs, for the whole batch, only
-        if one of the batch's designs selects it (and a shortcut's own grid only if one
-        refuses the trial), so a batch of similar designs costs one tier; each design gets
+        the paper's Fig. 1 point among them, then cost that grid, its estimate and the check
+        (at Fig. 1 about 2.5-3.5 times ``baseline_jmse`` at ``B = 64`` for the value and
+        about twice for ``value_and_grad``), and the others pay the two cheap grids on top
+        of their own. Under ``vmap`` a tier runs, for the whole batch, only
+        if one of the batch's designs selects it (and a tier's own grid only if one refuses
+        its shortcut), so a batch of similar designs costs one tier; each design gets
         what it gets alone. The value can jump, within the tolerance, where a
         design crosses a tier bound or the shortcut's threshold; an optimiser wants a fixed
         grid (``"fast"``, ``optimise``'s default). Every preset integrates a rotationally
