@@ -40,7 +40,13 @@ import recheck_tiers  # noqa: E402
 from problems import PROBLEMS  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
-from jmse_jax._merit import _compiled_estimated, _Static, _tier_index  # noqa: E402
+from jmse_jax._merit import (  # noqa: E402
+    _accepts,
+    _compiled_estimated,
+    _first_kept,
+    _Static,
+    _tier_index,
+)
 
 
 def _parse_grid(text: str) -> dict:
@@ -109,15 +115,18 @@ def _tier_report(tier, first_grid, first_tol, lines, check_grid=None):
         return np.abs(values / refs - 1.0)
 
     def agrees(value, check):
-        return np.abs(value - check) <= shortcut.rtol * np.abs(value)
+        return np.asarray(_accepts(value, check, shortcut.rtol))
+
+    def keeps_first(check):
+        return np.asarray(_first_kept(first, estimate, check, shortcut.rtol, first_tol))
 
     check64 = _values(check_grid, args)
     check32 = _values(check_grid, args, float32=True)
     first = _values(first_grid, args)
     estimate = _estimates(first_grid, args)
     own = _values(own_grid, args)
-    keep_first = agrees(first, check32) & (estimate <= first_tol)
-    changed = int(np.sum(keep_first != (agrees(first, check64) & (estimate <= first_tol))))
+    keep_first = keeps_first(check32)
+    changed = int(np.sum(keep_first != keeps_first(check64)))
     returned = np.where(keep_first, first, own)
     keep_trial = np.zeros(len(args), bool)
     if shortcut.trial is not None:

@@ -19,7 +19,6 @@ Writes ``results/shortcut_second_grid.json`` and ``.md``.
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -30,8 +29,10 @@ import _common as common  # noqa: E402 - turns on float64
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 import recheck_shortcut as rs  # noqa: E402
+from problems import PROBLEMS  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
+from jmse_jax._merit import _accepts, _first_kept  # noqa: E402
 
 CANDIDATES = {
     "(32, 12) / (600, 64) / (28, 24) floor 10": dict(
@@ -47,21 +48,14 @@ CANDIDATES = {
 
 
 def _fig1_times(grid):
-    ab = jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198)
-    args = (ab, 0.95, 0.2, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3))
+    """Warm (value, value_and_grad) times of ``grid`` at the Fig. 1 point, in ms."""
+    args = next(p for p in PROBLEMS if p.name == "fig1").arguments()
 
-    def median_ms(fn):
-        jax.block_until_ready(fn(*args))
-        times = []
-        for _ in range(60):
-            start = time.perf_counter()
-            jax.block_until_ready(fn(*args))
-            times.append(time.perf_counter() - start)
-        return 1e3 * float(np.median(times))
+    def merit(ab, *rest):
+        return jj.jmse(ab, *rest, **grid)
 
-    value = jax.jit(lambda ab, *rest: jj.jmse(ab, *rest, **grid))
-    vag = jax.jit(jax.value_and_grad(lambda ab, *rest: jj.jmse(ab, *rest, **grid)))
-    return median_ms(value), median_ms(vag)
+    return tuple(1e3 * common.time_compiled(fn, args, budget_s=1.0, max_repeats=60)["warm_s"]
+                 for fn in (merit, jax.value_and_grad(merit)))
 
 
 def main() -> None:
@@ -73,9 +67,13 @@ def main() -> None:
     first_estimate = rs._estimates(shortcut.first, args)
 
     def agrees(value, other):
-        return np.abs(value - other) <= shortcut.rtol * np.abs(value)
+        return np.asarray(_accepts(value, other, shortcut.rtol))
 
-    refused = ~(agrees(first, check) & (first_estimate <= shortcut.first_tol))
+    def kept(value, estimate, other):
+        return np.asarray(_first_kept(value, estimate, other, shortcut.rtol,
+                                      shortcut.first_tol))
+
+    refused = ~kept(first, first_estimate, check)
     index = np.where(refused)[0]
     subset = [args[i] for i in index]
     grids = {"first grid (present)": dict(shortcut.first), **CANDIDATES,
@@ -102,9 +100,8 @@ def main() -> None:
             values = rs._values(grid, subset)
             estimate = rs._estimates(grid, subset)
             errors = np.abs(values / refs[index] - 1.0)
-            within = estimate <= shortcut.first_tol
-            by_check = agrees(values, check[index]) & within
-            by_first = agrees(values, first[index]) & within
+            by_check = kept(values, estimate, check[index])
+            by_first = kept(values, estimate, first[index])
             row.update(kept_by_check=int(by_check.sum()),
                        worst_by_check=float(np.max(errors[by_check], initial=0.0)),
                        kept_by_first=int(by_first.sum()),

@@ -500,10 +500,7 @@ def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror,
     """``\\iint_band S_e`` over the folded first quadrant (``mirror``: the x-mirrored one);
     with ``estimate``, also its ``_interpolation_estimate``."""
     sign = -1.0 if mirror else 1.0
-    polar = options["quadrature"] == "polar"
-    if estimate and not (polar and options["se_nodes"] is not None):
-        raise ValueError("an estimated grid needs the polar rule with se_nodes")
-    if polar:
+    if options["quadrature"] == "polar":
         coarse = polar_panels(u, *options["nodes"], dtype)
         h = _polar_otf(aberrations, sign * coarse.nu_x, coarse.nu_y, field, options)
         if options["se_nodes"] is None:
@@ -542,8 +539,6 @@ _ESTIMATE_DROP = ((1, 0), (0, 1))
 
 def _estimated_merit_value(options, dtype, aberrations, field, u, signal, noise):
     """``(merit, estimate)``: ``_merit_value`` with its interpolation-error estimate."""
-    if options.get("_radial"):
-        raise ValueError("an estimated grid needs the polar rule with se_nodes")
     return _merit_value(options, dtype, aberrations, field, u, signal, noise, estimate=True)
 
 
@@ -609,6 +604,9 @@ def _merit_value(options, dtype, aberrations, field, u, signal, noise, estimate=
     the relative interpolation-error estimate of ``_interpolation_estimate`` (the larger of
     the two halves' for a wavefront that is not even in x; a polar grid with a fine S_e
     stage only)."""
+    if estimate and (options.get("_radial") or options["quadrature"] != "polar"
+                     or options["se_nodes"] is None):
+        raise ValueError("an estimated grid needs the polar rule with se_nodes")
     if options.get("_radial"):  # a plan for rotationally symmetric designs (see jmse)
         total = radial_band_integral(aberrations, field, u, signal, noise, options, dtype)
         return total / (2.0 * math.pi)
@@ -702,6 +700,12 @@ def _radial_plans(plans):
 def _accepts(trial, check, rtol):
     """Whether a shortcut's ``trial`` value stands (False for non-finite values)."""
     return jnp.abs(trial - check) <= rtol * jnp.abs(trial)
+
+
+def _first_kept(first, estimate, check, rtol, first_tol):
+    """Whether a shortcut's ``first`` value stands: the check agrees with it (``_accepts``)
+    and its error ``estimate`` is at most ``first_tol``."""
+    return _accepts(first, check, rtol) & (estimate <= first_tol)
 
 
 #: The dtype in which a shortcut's check grid is computed, whatever the merit's dtype.
@@ -851,8 +855,8 @@ def _batched_tier(plan, dtype, with_grad, mask, operands, zeros):
             if first_grid is None:
                 return second(ops)
             result, estimate = jax.vmap(_first_fn(first_grid, dtype, with_grad))(ops)
-            accepted = (eligible & _accepts(_value_of(result, with_grad), check, rtol)
-                        & (estimate <= first_tol))
+            accepted = eligible & _first_kept(_value_of(result, with_grad), estimate, check,
+                                              rtol, first_tol)
             if trial_grid is None:
                 return result, accepted
             trial, kept = jax.lax.cond(jnp.any(mask & eligible & ~accepted), second,
@@ -956,7 +960,7 @@ def _shortcut_attempt(shortcut, dtype, operands, with_grad):
         if first_fn is None:
             return attempt_trial(ops, check)
         first, estimate = first_fn(ops)
-        kept = _accepts(_value_of(first, with_grad), check, rtol) & (estimate <= first_tol)
+        kept = _first_kept(_value_of(first, with_grad), estimate, check, rtol, first_tol)
         if trial_fn is None:
             return first, kept
         return jax.lax.cond(kept, lambda ops, check: (first, kept), attempt_trial, ops, check)
@@ -998,7 +1002,7 @@ def _eager_tier_choice(plan, dtype, operands):
             check = _compiled_check(_Static(check_grid), dtype, operands)
             if first_grid is not None:
                 first, estimate = _compiled_estimated(_Static(first_grid), dtype, operands)
-                if bool(_accepts(first, check, rtol) & (estimate <= first_tol)):
+                if bool(_first_kept(first, estimate, check, rtol, first_tol)):
                     return first, "first"
             if trial_grid is not None:
                 trial = _compiled_merit(_Static(trial_grid), dtype, operands)
