@@ -334,6 +334,15 @@ def write_json(path: pathlib.Path, data) -> None:
     path.write_text(json.dumps(data, indent=2, default=_json_default))
 
 
+def write_report(name: str, report: dict, lines: list[str]) -> None:
+    """Print a study's markdown ``lines`` and write ``results/<name>.json`` (``report``, with
+    the load average at the end added to its ``machine`` entry) and ``results/<name>.md``."""
+    report["machine"]["load_at_end"] = load_average()
+    print("\n".join(lines))
+    write_json(RESULTS / f"{name}.json", report)
+    (RESULTS / f"{name}.md").write_text("\n".join(lines) + "\n")
+
+
 def _json_default(value):
     if isinstance(value, np.generic):
         return value.item()

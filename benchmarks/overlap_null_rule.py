@@ -142,10 +142,7 @@ def main() -> None:
             f"{a} vs {b}" for a, b in zip(row["estimate_alone_by_strength"].values(),
                                           row["present_by_strength"].values(), strict=True))
             + " |")
-    report["machine"]["load_at_end"] = common.load_average()
-    print("\n".join(lines))
-    common.write_json(common.RESULTS / "overlap_null_rule.json", report)
-    (common.RESULTS / "overlap_null_rule.md").write_text("\n".join(lines) + "\n")
+    common.write_report("overlap_null_rule", report, lines)
 
 
 if __name__ == "__main__":

@@ -198,10 +198,7 @@ def main() -> None:
         for text in args_.check:
             report["rows"].append(_tier_report(tier, shortcut.first, shortcut.first_tol,
                                                lines, check_grid=_parse_grid(text)))
-    report["machine"]["load_at_end"] = common.load_average()
-    print("\n".join(lines))
-    common.write_json(common.RESULTS / "recheck_shortcut.json", report)
-    (common.RESULTS / "recheck_shortcut.md").write_text("\n".join(lines) + "\n")
+    common.write_report("recheck_shortcut", report, lines)
 
 
 if __name__ == "__main__":

@@ -193,9 +193,7 @@ def main() -> None:
         if index == 0:  # tier 0's grid is also tier 1's trial: the default as a whole
             report["trial"] = _recheck_trial(designs, grid, angular.get(0, ()), trial_lines)
     lines += trial_lines
-    report["machine"]["load_at_end"] = common.load_average()
-    common.write_json(common.RESULTS / "recheck_tiers.json", report)
-    (common.RESULTS / "recheck_tiers.md").write_text("\n".join(lines) + "\n")
+    common.write_report("recheck_tiers", report, lines)
 
 
 if __name__ == "__main__":

@@ -115,9 +115,7 @@ def main() -> None:
         lines.append(f"| {name} | {cells} | {value_ms:.2f} ms | {vag_ms:.2f} ms |")
         print(lines[-1], flush=True)
         report["rows"].append(row)
-    print("\n".join(lines))
-    common.write_json(common.RESULTS / "shortcut_second_grid.json", report)
-    (common.RESULTS / "shortcut_second_grid.md").write_text("\n".join(lines) + "\n")
+    common.write_report("shortcut_second_grid", report, lines)
 
 
 if __name__ == "__main__":
