@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
-from ._aberrations import AbstractAberrations
+from ._aberrations import AbstractAberrations, Seidel
 from ._numerics import (
     EXACT,
     check_choice,
@@ -251,6 +251,22 @@ def _validate_geometry(aberrations, field, u):
     check_finite_tree("aberrations", aberrations)
     check_range("field", field, 0.0, 1.0)
     check_range("u", u, 0.0, U_MAX, low_inclusive=False)
+    _check_one_design(aberrations, field, u)
+
+
+def _check_one_design(aberrations, field, u):
+    """``ValueError`` unless ``field``, ``u`` and Seidel coefficients are scalars (one design;
+    batches go through ``sweep_jmse`` or ``jax.vmap``)."""
+    named = [("field", field), ("u", u)]
+    if isinstance(aberrations, Seidel):
+        named += [(f"aberrations.{name}", getattr(aberrations, name))
+                  for name in Seidel.__dataclass_fields__]
+    for name, value in named:
+        if jnp.ndim(value) != 0:
+            raise ValueError(
+                f"{name} must be a scalar (one design), got shape {jnp.shape(value)}; for "
+                "many designs use jmse_jax.sweep_jmse or jax.vmap"
+            )
 
 
 def _validate(aberrations, field, u, signal, noise):
@@ -261,18 +277,28 @@ def _validate(aberrations, field, u, signal, noise):
         raise TypeError(f"noise must be a jmse_jax noise model, got {type(noise)}")
 
 
-def _sanitise(tree):
-    """Replace the leaves by zeros when any is non-finite; return (tree, all_finite).
+def _sanitise(inputs):
+    """``(inputs, ok)``: ``ok`` when every leaf is finite and ``field``, ``u`` and the
+    spectra's parameters are in range; where not, the inputs are replaced by a harmless
+    stand-in design (no aberrations, ``field`` 0, ``u`` 0.5, every spectrum parameter 1).
 
     Used when values are traced (no ValueError possible): the merit then returns ``+inf``
-    with zero gradient instead of NaN.
+    with zero gradient instead of NaN or a plausible-looking wrong number.
     """
-    leaves, treedef = jax.tree_util.tree_flatten(tree)
-    if not leaves:
-        return tree, jnp.asarray(True)
-    finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(leaf)) for leaf in leaves]))
-    safe = [jnp.where(finite, leaf, jnp.zeros_like(leaf)) for leaf in leaves]
-    return jax.tree_util.tree_unflatten(treedef, safe), finite
+    aberrations, field, u, signal, noise = inputs
+    leaves = jax.tree_util.tree_leaves(inputs)
+    ok = jnp.all(jnp.stack([jnp.all(jnp.isfinite(leaf)) for leaf in leaves]))
+    ok = (ok & (field >= 0) & (field <= 1) & (u > 0) & (u <= U_MAX)
+          & jnp.asarray(signal.valid(), bool) & jnp.asarray(noise.valid(), bool))
+    stand_in = (
+        jax.tree_util.tree_map(jnp.zeros_like, aberrations),
+        jnp.zeros_like(field),
+        jnp.full_like(u, 0.5),
+        jax.tree_util.tree_map(jnp.ones_like, signal),
+        jax.tree_util.tree_map(jnp.ones_like, noise),
+    )
+    safe = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), inputs, stand_in)
+    return safe, ok
 
 
 def _otf_at(aberrations, nu_x, nu_y, field, options):
@@ -743,7 +769,9 @@ def _eligible(operands, u_max):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
 def _switched_merit(static, index, operands):
-    """The merit of tier ``index`` of ``static.value[0]``: one tier runs (``lax.switch``).
+    """The merit of plan ``index[0]`` of ``static.value[0]``: one plan runs (``lax.switch``).
+    ``index[1]`` is the design's tier among the plans before the one-ray ones
+    (``static.value[2]`` of them; None when there are no one-ray plans or only those).
 
     A tier with a shortcut computes its trial and check values and keeps the trial's when
     they agree, else computes its own grid (``lax.cond``: only one of the two runs under
@@ -753,14 +781,17 @@ def _switched_merit(static, index, operands):
     carry the residuals of every branch (many times the cost of the selected one). Here the
     selected branch computes its value and gradient together, and the tangent is their
     inner product with the input tangents, outside the switch (forward and reverse mode).
-    The gradient is that of the grid whose value is returned.
+    The gradient is that of the grid whose value is returned, except for a one-ray plan
+    taken because the values happen to be symmetric: its derivative would miss every
+    direction that breaks the symmetry (the one ray cannot see them), so the gradient comes
+    from the design's tier, whose grid covers the plane (and so do higher derivatives).
 
     Under ``vmap`` (``_dispatch``) each tier runs, for the whole batch, only when one of
     the batch's designs selects it, and a shortcut's own grid only when one of them refuses
     the trial.
     """
-    plans, dtype = static.value
-    return _dispatch(plans, dtype, with_grad=None)(index, operands)
+    plans, dtype, _ = static.value
+    return _dispatch(plans, dtype, with_grad=None)(index[0], operands)
 
 
 def _dispatch(plans, dtype, with_grad):
@@ -769,6 +800,7 @@ def _dispatch(plans, dtype, with_grad):
 
     ``with_grad`` is None for the value alone, else a tuple of booleans, one per leaf of the
     operands: the gradient (a list) is taken in the leaves marked True (``_value_and_grad``).
+    A plan may be ``None`` (values only): a zero, and nothing runs.
 
     ``vmap`` of a ``lax.switch`` or ``lax.cond`` whose index is batched evaluates every
     branch for every design and selects. The rule instead runs each tier, vectorised over
@@ -779,7 +811,8 @@ def _dispatch(plans, dtype, with_grad):
     gets alone; a batch of designs from one tier costs one tier.
     """
     if with_grad is None:
-        branches = [functools.partial(_tier_value, plan, dtype) for plan in plans]
+        branches = [functools.partial(_tier_value, plan, dtype) if plan is not None
+                    else functools.partial(_no_value, dtype) for plan in plans]
     else:
         branches = [functools.partial(_tier_value_and_grad, plan, dtype, with_grad)
                     for plan in plans]
@@ -814,12 +847,20 @@ def _dispatch(plans, dtype, with_grad):
         zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shape)
         out = zeros
         for tier, plan in enumerate(plans):
+            if plan is None:  # a value of zero (``_no_value``): the zeros stand
+                continue
             mask = index == tier
             result = _batched_tier(plan, dtype, with_grad, mask, operands, zeros)
             out = jax.tree_util.tree_map(functools.partial(_select, mask), result, out)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return run
+
+
+def _no_value(dtype, operands):
+    """The merit of the ``None`` plan of ``_dispatch``: nothing runs (a zero)."""
+    del operands
+    return jnp.zeros((), dtype)
 
 
 def _select(mask, chosen, other):
@@ -1036,8 +1077,8 @@ def _compiled_check(grid, dtype, operands):
 
 
 def _switched_merit_jvp(static, primals, tangents):
-    plans, dtype = static.value
-    index, operands = primals
+    plans, dtype, n_base = static.value
+    (index, tier), operands = primals
     _, d_operands = tangents
     # Only the operands that carry a tangent are differentiated: forward mode (``jvp``,
     # ``jacfwd``) and un-jitted reverse mode would otherwise form the gradient in ``u``, the
@@ -1047,7 +1088,16 @@ def _switched_merit_jvp(static, primals, tangents):
                                          is_leaf=lambda x: isinstance(x, SymbolicZero))
     # (JAX calls this rule only when some tangent is nonzero.)
     wrt = tuple(not isinstance(t, SymbolicZero) for t in d_leaves)
-    value, gradient = _dispatch(plans, dtype, with_grad=wrt)(index, operands)
+    if n_base is None:
+        value, gradient = _dispatch(plans, dtype, with_grad=wrt)(index, operands)
+    else:
+        # Gradient from the tier's plane grid; the value from the one-ray plan when it is
+        # the one taken (the last, None, plan: nothing runs for the others).
+        value, gradient = _dispatch(plans[:n_base], dtype, with_grad=wrt)(tier, operands)
+        n_ray = len(plans) - n_base
+        ray = jnp.where(index >= n_base, index - n_base, n_ray)
+        ray_value = _dispatch(plans[n_base:] + (None,), dtype, with_grad=None)(ray, operands)
+        value = jnp.where(index >= n_base, ray_value.astype(value.dtype), value)
     # Operands wider than the computation (a float64 signal in a float32 merit) contribute
     # in their own dtype; the tangent takes the value's.
     live = [t for t, w in zip(d_leaves, wrt, strict=True) if w]
@@ -1147,7 +1197,8 @@ def jmse(
     Notes
     -----
     Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
-    under ``jit``/``vmap`` non-finite inputs give ``+inf`` (never NaN) with zero gradient.
+    under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u``, the spectra's
+    parameters) give ``+inf`` (never NaN) with zero gradient.
     Works in float32 and float64; the result follows the inputs' dtype.
 
     Outside ``jit`` nothing runs primitive by primitive: a call on concrete inputs
@@ -1217,12 +1268,21 @@ def _tier_of(static, aberrations, field, u):
 
 
 def _plans_and_index(static, aberrations, field, u):
-    """All plans of ``static`` and the index of the one this design takes (traceable)."""
+    """All plans of ``static``, the index of the one this design takes, and the number of
+    plans before the one-ray plans when the choice of those depends on the values (else
+    None), all traceable.
+
+    A one-ray plan chosen because the values happen to be symmetric (coma and astigmatism
+    zero off the axis, or on the axis at all) gives the right value but not the right
+    derivatives in the directions that break the symmetry: ``_switched_merit``'s derivative
+    rule then takes the gradient from the design's own tier (``_switched_merit_jvp``).
+    """
     plans = _base_plans(static)
     index = _tier_of(static, aberrations, field, u)
     # A rotationally symmetric design (any design on the axis) is integrated along one ray:
     # more plans in the same switch (``_radial_plans``).
     symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
+    n_base = None
     if symmetric is not False:
         radial_plans, split = _radial_plans(plans)
         group = (index >= split).astype(jnp.int32) if len(radial_plans) > 1 else 0
@@ -1230,9 +1290,10 @@ def _plans_and_index(static, aberrations, field, u):
             plans, index = radial_plans, group + jnp.zeros((), jnp.int32)
         else:
             symmetric = jax.lax.stop_gradient(symmetric)
-            index = jnp.where(symmetric, len(plans) + group, index)
+            n_base = len(plans)
+            index = jnp.where(symmetric, n_base + group, index)
             plans = plans + radial_plans
-    return plans, index
+    return plans, index, n_base
 
 
 @functools.partial(jax.jit, static_argnums=0)
@@ -1250,11 +1311,12 @@ def _traced_merit(static, inputs):
     # |H| does not depend on tilt; removing it smooths H over the band (fewer OTF nodes).
     aberrations = aberrations.without_tilt()
     operands = (aberrations, field, u, signal, noise)
-    plans, index = _plans_and_index(static, aberrations, field, u)
+    plans, index, n_base = _plans_and_index(static, aberrations, field, u)
     if len(plans) == 1 and plans[0][1] is None:
         value = _merit_value(plans[0][0], dtype, *operands)
     else:
-        value = _switched_merit(_Static((plans, dtype)), index, operands)
+        tier = _tier_of(static, aberrations, field, u)
+        value = _switched_merit(_Static((plans, dtype, n_base)), (index, tier), operands)
     return jnp.where(finite, value, jnp.inf)
 
 
@@ -1290,15 +1352,21 @@ def baseline_jmse(aberrations, field, u, signal, noise, B: int = 64):
     divided by ``2 pi``. Converges erratically (first order in ``1/B``): about -8 % at
     ``B = 64`` on the paper's Fig. 1 point.
 
-    Parameters are as in ``jmse``; ``B`` is the pupil grid size (``>= 1``).
+    Parameters are as in ``jmse``; ``B`` is the pupil grid size (``>= 1``). Bad concrete
+    input raises ``ValueError``; under ``jit`` non-finite or out-of-range values give
+    ``+inf``, as in ``jmse``.
     """
     check_count("B", B)
     _validate(aberrations, field, u, signal, noise)
     dtype = common_dtype(aberrations, field, u, signal, noise)
-    grid_otf = otf_fft_grid(aberrations, jnp.asarray(field, dtype), B, dtype)
+    # Under jit: +inf for non-finite or out-of-range values, as jmse gives.
+    (aberrations, field, u, signal, noise), ok = _sanitise(
+        (aberrations, jnp.asarray(field, dtype), jnp.asarray(u, dtype), signal, noise))
+    grid_otf = otf_fft_grid(aberrations, field, B, dtype)
     k = jnp.fft.fftfreq(2 * B, 1.0 / (2 * B)).astype(dtype)
     nu_x, nu_y = jnp.meshgrid(k / B, k / B, indexing="xy")
     u = jnp.asarray(u, dtype)
     band = (jnp.abs(nu_x) < u) & (jnp.abs(nu_y) < u)
     s_e = error_spectral_density(grid_otf, signal(nu_x, nu_y), noise(nu_x, nu_y))
-    return jnp.sum(jnp.where(band, s_e, 0.0)) / (B * B) / (2.0 * math.pi)
+    value = jnp.sum(jnp.where(band, s_e, 0.0)) / (B * B) / (2.0 * math.pi)
+    return jnp.where(ok, value, jnp.inf)

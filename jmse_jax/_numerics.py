@@ -278,6 +278,20 @@ def _describe(value) -> str:
     return np.array2string(arr, threshold=6, precision=6)
 
 
+def _real_array(name: str, value) -> np.ndarray:
+    """``value`` as a float64 array; ``TypeError`` naming ``name`` when it is not real
+    numbers (a string, a bool, ``None``, a complex number, a ragged list)."""
+    raw = value
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError):
+        pass
+    kind = getattr(raw, "dtype", np.dtype(object)).kind
+    if kind not in "iuf":
+        raise TypeError(f"{name} must be a real number (or array of them), got {value!r}")
+    return raw.astype(np.float64)
+
+
 def check_range(
     name: str,
     value,
@@ -293,7 +307,7 @@ def check_range(
     """
     if not is_concrete(value):
         return
-    arr = np.asarray(value, dtype=np.float64)
+    arr = _real_array(name, value)
     lo = "(" if not low_inclusive else "["
     hi = ")" if not high_inclusive else "]"
     allowed = f"{lo}{'-inf' if low is None else low}, {'inf' if high is None else high}{hi}"
@@ -309,13 +323,20 @@ def check_range(
 
 
 def check_finite_tree(name: str, tree) -> None:
-    """Raise ``ValueError`` when any concrete float leaf of ``tree`` is NaN or infinite."""
+    """Raise ``ValueError`` when any concrete float leaf of ``tree`` is NaN or infinite, and
+    ``TypeError`` when a leaf is not real numbers (a string, say)."""
     for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
         if not is_concrete(leaf):
             continue
-        arr = np.asarray(leaf)
+        where = jax.tree_util.keystr(path)
+        try:
+            arr = np.asarray(leaf)
+        except (TypeError, ValueError):
+            arr = np.asarray(None)
+        if arr.dtype.kind in "USOc":
+            raise TypeError(f"{name}{where} must be a real number (or array of them), "
+                            f"got {leaf!r}")
         if np.issubdtype(arr.dtype, np.number) and not np.all(np.isfinite(arr)):
-            where = jax.tree_util.keystr(path)
             raise ValueError(f"{name}{where} must be finite, got {_describe(arr)}")
 
 

@@ -210,8 +210,12 @@ def _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc):
     return aberrations.difference(xi_x, xi_y, dx, dy, field)
 
 
-def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
-    """Overlap-quadrature OTF at a flat vector of nodes; returns (real, imag)."""
+def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype, zero_slope=None):
+    """Overlap-quadrature OTF at a flat vector of nodes; returns (real, imag).
+
+    ``zero_slope``: the wavefront's mean gradient (``_mean_gradient``), which gives ``Im H``
+    its derivative at ``nu = 0`` (``Re H`` has a cone there: derivative 0); without it both
+    derivatives there are 0 (``jmse`` never evaluates ``nu = 0``)."""
     exact = _exact_chords(aberrations)
     degree = aberrations.chord_degree
     chord_points = n_t if degree is None or degree + 1 >= n_t else degree + 1
@@ -248,8 +252,23 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype):
     rule_area = 4.0 * jnp.sum(chord_w, axis=1)
     scale = diffraction_limited_otf(s_safe) / rule_area
     re = jnp.where(interior, re * scale, jnp.where(s == 0, 1.0, 0.0))
-    im = jnp.where(interior, im * scale, 0.0)
+    if zero_slope is None:
+        im = jnp.where(interior, im * scale, 0.0)
+    else:  # Im H = 4 pi nu . <grad W> + O(|nu|^3) at nu = 0: value 0, the right slope
+        gx, gy = zero_slope
+        im = jnp.where(interior, im * scale,
+                       jnp.where(s == 0, (4.0 * math.pi) * (nu_x * gx + nu_y * gy), 0.0))
     return re, im
+
+
+def _mean_gradient(aberrations, field, dtype):
+    """The wavefront's mean gradient over the pupil, ``(<dW/dx>, <dW/dy>)``, from the
+    divergence theorem: ``(1/pi) oint W n ds``, by the trapezoid rule on the rim (exact for
+    polynomials of degree below 64)."""
+    theta = jnp.asarray(2.0 * math.pi * np.arange(64) / 64, dtype)
+    cos_t, sin_t = jnp.cos(theta), jnp.sin(theta)
+    rim = aberrations(cos_t, sin_t, field)
+    return (2.0 / 64) * jnp.sum(rim * cos_t), (2.0 / 64) * jnp.sum(rim * sin_t)
 
 
 def along_chord_order(n_t: int, dtype) -> int:
@@ -269,10 +288,10 @@ def along_chord_order(n_t: int, dtype) -> int:
     return n_t
 
 
-def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False):
+def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False, zero_slope=False):
     """Overlap-engine OTF at ``(nu_x, nu_y)``; ``remat``: when the nodes span several blocks,
     reverse mode recomputes each block instead of storing its chord moments (less memory,
-    more time)."""
+    more time); ``zero_slope``: give ``Im H`` its derivative at ``nu = 0`` (``otf``)."""
     n_phi, n_t = nodes
     dtype = common_dtype(aberrations, nu_x, nu_y, field)
     n_t = along_chord_order(n_t, dtype)
@@ -281,9 +300,11 @@ def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False):
     flat_x, flat_y = nu_x.reshape(-1), nu_y.reshape(-1)
     field = jnp.asarray(field, dtype)
     n = flat_x.shape[0]
+    slope = _mean_gradient(aberrations, field, dtype) if zero_slope else None
     block = max(1, min(n, _OVERLAP_BLOCK * 1024 // (n_phi * n_t)))
     if n <= block:
-        re, im = _otf_overlap_flat(aberrations, flat_x, flat_y, field, n_phi, n_t, dtype)
+        re, im = _otf_overlap_flat(aberrations, flat_x, flat_y, field, n_phi, n_t, dtype,
+                                   slope)
     else:
         # Equal blocks no larger than the cap: the fewest blocks, padded by < n_blocks nodes
         # (a fixed block size padded the last block by up to a whole block of dead work).
@@ -294,7 +315,8 @@ def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False):
         py = jnp.pad(flat_y, (0, pad)).reshape(n_blocks, block)
 
         def one_block(xy):
-            return _otf_overlap_flat(aberrations, xy[0], xy[1], field, n_phi, n_t, dtype)
+            return _otf_overlap_flat(aberrations, xy[0], xy[1], field, n_phi, n_t, dtype,
+                                     slope)
 
         if remat:
             one_block = jax.checkpoint(one_block)
@@ -405,7 +427,8 @@ def otf(
     Notes
     -----
     Differentiable in every float input (coefficients, ``field``, ``nu``); the gradient is
-    finite at ``nu = 0`` (where ``H`` has a cone and the gradient returned is 0) and at
+    finite at ``nu = 0`` (where ``Re H`` has a cone and its gradient returned is 0, while
+    ``Im H`` has the slope ``4 pi <grad W>``, the mean wavefront gradient: a tilt's) and at
     ``|nu| = 1``.
 
     Examples
@@ -435,7 +458,7 @@ def _compiled_otf(method, setting, aberrations, nu_x, nu_y, field):
     """The engine ``method`` (``setting``: its nodes or ``B``), compiled once per input shape
     (outside ``jit`` the engines would otherwise run primitive by primitive)."""
     if method == "overlap":
-        return _otf_overlap(aberrations, nu_x, nu_y, field, setting)
+        return _otf_overlap(aberrations, nu_x, nu_y, field, setting, zero_slope=True)
     if method == "nudft":
         return _otf_nudft(aberrations, nu_x, nu_y, field, setting)
     return _otf_fft(aberrations, nu_x, nu_y, field, setting)

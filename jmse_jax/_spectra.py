@@ -27,6 +27,15 @@ __all__ = [
 ]
 
 
+def _positive(*values):
+    """All ``values`` finite and > 0, as a traceable boolean."""
+    ok = jnp.asarray(True)
+    for value in values:
+        value = jnp.asarray(value)
+        ok = ok & jnp.all(jnp.isfinite(value) & (value > 0))
+    return ok
+
+
 class AbstractSignal(eqx.Module):
     """An isotropic signal power spectral density ``S_x(nu)``."""
 
@@ -43,6 +52,12 @@ class AbstractSignal(eqx.Module):
         """True when ``S_x(nu) = radial(|nu|)`` (a subclass that overrides ``__call__`` is
         not assumed to be)."""
         return type(self).__call__ is AbstractSignal.__call__
+
+    def valid(self):
+        """Whether the parameters are in range, as a (traceable) boolean: ``jmse`` under
+        ``jit`` returns ``+inf`` where they are not (the constructors raise for concrete
+        values). True unless a subclass says otherwise."""
+        return jnp.asarray(True)
 
 
 class MarkovSignal(AbstractSignal):
@@ -63,6 +78,9 @@ class MarkovSignal(AbstractSignal):
     def __check_init__(self):
         check_range("variance", self.variance, 0.0, None, low_inclusive=False)
         check_range("correlation_length", self.correlation_length, 0.0, None, low_inclusive=False)
+
+    def valid(self):
+        return _positive(self.variance, self.correlation_length)
 
     def radial(self, r):
         mu = self.correlation_length
@@ -90,6 +108,9 @@ class PowerLawSignal(AbstractSignal):
         check_range("exponent", self.exponent, 0.0, None, low_inclusive=False)
         check_range("knee", self.knee, 0.0, None, low_inclusive=False)
 
+    def valid(self):
+        return _positive(self.amplitude, self.exponent, self.knee)
+
     def radial(self, r):
         return self.amplitude * (self.knee**2 + r * r) ** (-0.5 * self.exponent)
 
@@ -101,6 +122,9 @@ class WhiteSignal(AbstractSignal):
 
     def __check_init__(self):
         check_range("level", self.level, 0.0, None, low_inclusive=False)
+
+    def valid(self):
+        return _positive(self.level)
 
     def radial(self, r):
         return jnp.full_like(r, 1.0) * self.level
@@ -118,6 +142,11 @@ class AbstractNoise(eqx.Module):
         """True when ``S_n`` depends on ``|nu|`` only (False unless a subclass says so)."""
         return False
 
+    def valid(self):
+        """Whether the parameters are in range, as a (traceable) boolean (see
+        ``AbstractSignal.valid``). True unless a subclass says otherwise."""
+        return jnp.asarray(True)
+
 
 class WhiteNoise(AbstractNoise):
     """White detector noise ``S_n = variance``.
@@ -131,6 +160,9 @@ class WhiteNoise(AbstractNoise):
 
     def __check_init__(self):
         check_range("noise variance", self.variance, 0.0, None, low_inclusive=False)
+
+    def valid(self):
+        return _positive(self.variance)
 
     def __call__(self, nu_x, nu_y):
         return jnp.zeros_like(nu_x * nu_y) + self.variance

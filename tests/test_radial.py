@@ -7,6 +7,7 @@ finite differences, and the symmetry of the JMSE in the field height.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -222,3 +223,85 @@ def test_vmap_mixes_symmetric_and_other_designs():
         return jj.jmse(a, f, u, SIGNAL, NOISE)
 
     assert_vmap_matches_singles(merit, designs)
+
+
+_FAST_SEIDEL = ("w020", "w040", "w131", "w222", "w220")
+
+
+@functools.partial(jax.jit, static_argnames="plane")
+def _fast_theta(theta, field, plane=False):
+    """The fast preset's JMSE of ``Seidel(*theta)`` (five coefficients) at u = 0.3;
+    ``plane``: its polar grid given explicitly, so that no design takes the one-ray plan."""
+    ab = jj.Seidel(**dict(zip(_FAST_SEIDEL, theta, strict=True)))
+    grid = dict(nodes=jj.PRESETS["fast"]["nodes"]) if plane else {}
+    return jj.jmse(ab, field, 0.3, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3), preset="fast",
+                   **grid)
+
+
+def _richardson(fn, x, i, h):
+    """Central difference of ``fn`` along coordinate ``i`` with one Richardson step."""
+    def plain(step):
+        e = np.zeros_like(x)
+        e[i] = step
+        return (float(fn(x + e)) - float(fn(x - e))) / (2 * step)
+    return (4 * plain(h / 2) - plain(h)) / 3
+
+
+@pytest.mark.parametrize("field", [0.7, 0.0])
+def test_derivatives_break_the_symmetry_correctly(field):
+    """A design symmetric only because coma and astigmatism are zero (off the axis) or
+    vanish on it takes the one-ray plan for its value, but its derivatives come from the
+    polar grid and see every direction: the astigmatism's rho^2/2 part acts like defocus
+    (first derivative), and the second derivatives in coma and astigmatism are not zero (the
+    one ray cannot see them). Against central differences of the polar grid's value (the
+    one-ray value's differ by the polar grid's error, 6e-5 here: checked too)."""
+    theta = np.array([1.0, 0.5, 0.0, 0.0, 0.3])
+    x = jnp.asarray(theta)
+    grad = np.asarray(jax.jit(jax.grad(_fast_theta))(x, field))
+    fd = np.array([_richardson(lambda t: _fast_theta(jnp.asarray(t), field, plane=True), theta,
+                               i, 1e-4) for i in range(5)])
+    np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-12)
+    fd_ray = np.array([_richardson(lambda t: _fast_theta(jnp.asarray(t), field), theta, i, 1e-4)
+                       for i in (0, 1, 4)])  # directions that keep the symmetry
+    np.testing.assert_allclose(grad[[0, 1, 4]], fd_ray, rtol=1e-4)
+    if field:
+        # d/dw222 = (h^2 / 2) d/dw020 (w222 h^2 y^2 = w222 h^2 rho^2 / 2 + non-radial part).
+        assert grad[3] == pytest.approx(0.5 * field**2 * grad[0], rel=1e-6)
+        assert abs(grad[3]) > 1e-4
+    # Forward mode agrees, and the value under a derivative is the one-ray plan's.
+    value, tangent = jax.jvp(lambda t: _fast_theta(t, field), (x,), (jnp.eye(5)[3],))
+    assert float(tangent) == pytest.approx(grad[3], rel=1e-12, abs=1e-15)
+    assert float(value) == float(_fast_theta(x, field))
+    # Second derivatives in coma and astigmatism, and across, from the gradient's
+    # differences (the gradient is exact to ~1e-12, so a plain central step suffices).
+    hess = np.asarray(jax.jit(jax.hessian(_fast_theta))(x, field))
+    grad_fn = jax.jit(jax.grad(_fast_theta))
+    for i in (2, 3):
+        e = np.zeros(5)
+        e[i] = 1e-4
+        column = (np.asarray(grad_fn(x + e, field)) - np.asarray(grad_fn(x - e, field))) / 2e-4
+        np.testing.assert_allclose(hess[:, i], column, rtol=1e-4, atol=1e-9)
+    if field:
+        assert abs(hess[2, 2]) > 1e-5 and abs(hess[3, 3]) > 1e-6
+
+
+def test_zernike_derivatives_off_the_symmetric_terms():
+    """A Zernike set with zero non-radial terms: its value takes the one-ray plan, its
+    derivatives the polar grid's (central differences of that grid's value agree). The
+    derivative in each m = 2 term is zero: a rotation by 90 degrees flips its sign and
+    leaves the merit unchanged (the one ray used to give -5e-3 and -4e-3 here)."""
+    noll = (4, 6, 11, 12)
+
+    @functools.partial(jax.jit, static_argnames="plane")
+    def merit(c, plane=False):
+        grid = dict(nodes=jj.PRESETS["fast"]["nodes"]) if plane else {}
+        return jj.jmse(jj.Zernike(c, noll=noll), 0.0, 0.3, jj.MarkovSignal(1.0, 5.0),
+                       jj.WhiteNoise(1e-3), preset="fast", **grid)
+
+    c = np.array([0.8, 0.0, 0.3, 0.0])
+    grad = np.asarray(jax.jit(jax.grad(merit))(jnp.asarray(c)))
+    fd = np.array([_richardson(lambda t: merit(jnp.asarray(t), plane=True), c, i, 1e-4)
+                   for i in range(4)])
+    np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-10)
+    scale = abs(grad[0])
+    assert abs(grad[1]) <= 1e-9 * scale and abs(grad[3]) <= 1e-9 * scale

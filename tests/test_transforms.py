@@ -114,11 +114,27 @@ def _fd_check(coefficients, nu, field=0.95, h=1e-6, rtol=1e-6):
 
 
 def test_otf_gradient_at_zero_frequency():
-    grads = _grads(ABERRATED, [0.0, 0.0])
-    for part in ("re", "im"):
-        for g in grads[part]:
-            assert np.all(np.isfinite(g))
-            np.testing.assert_array_equal(g, 0.0)  # H(0) = 1 for every pupil; cone: 0 chosen
+    field = 0.95
+    grads = _grads(ABERRATED, [0.0, 0.0], field)
+    for g in (*grads["re"], grads["im"][0]):
+        assert np.all(np.isfinite(g))
+        # H(0) = 1 for every pupil; Re H has a cone there (0 chosen), and Im H(0) = 0.
+        np.testing.assert_array_equal(g, 0.0)
+    # Im H = 4 pi nu . <grad W> + O(|nu|^3): the mean gradient over the disc of the y-odd
+    # terms, <d(rho^2 y)/dy> = <x^2> + 3 <y^2> = 1, so 4 pi h (w131 + w311 h^2 + w111).
+    w131, w311, w111 = ABERRATED[2], ABERRATED[5], ABERRATED[6]
+    slope = 4 * np.pi * field * (w131 + w311 * field**2 + w111)
+    np.testing.assert_allclose(grads["im"][1], [0.0, slope], rtol=1e-13, atol=1e-13)
+    # ... which central differences confirm. The lens's rim adds a |nu| nu term to Im H
+    # (the discs' non-overlapping crescents, of width ~|nu|), so the quotient's error is
+    # O(h); one Richardson step for that leaves O(h^2).
+    def quotient(h):
+        up, down = (_otf_part(jnp.asarray(ABERRATED), jnp.asarray([0.0, v]), field, part="im")
+                    for v in (h, -h))
+        return (float(up) - float(down)) / (2 * h)
+
+    assert quotient(1e-4) != pytest.approx(slope, rel=1e-4)  # the O(h) term is there
+    assert 2 * quotient(5e-5) - quotient(1e-4) == pytest.approx(slope, rel=1e-5)
 
 
 @pytest.mark.parametrize("nu", [[0.3, -0.2], [0.0, 0.999], [0.706, 0.706]])
