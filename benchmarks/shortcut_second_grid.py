@@ -119,4 +119,9 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    import argparse
+
+    argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                            epilog="No options: runs the study and writes its results "
+                            "(results/<name>.json and .md).").parse_args()
     main()

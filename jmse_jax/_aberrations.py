@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import check_count, common_dtype
+from ._numerics import check_count, check_finite_tree, check_range, common_dtype
 
 __all__ = ["AbstractAberrations", "Seidel", "Zernike", "noll_to_nm", "wavefront"]
 
@@ -71,6 +71,15 @@ class AbstractAberrations(eqx.Module):
         del field
         return False
 
+    def first_order_symmetric(self, field):
+        """Whether, at a design where ``radially_symmetric`` holds, every first-order change
+        of the coefficients and of ``field`` changes ``jmse`` as its rotationally symmetric
+        part does (the one-ray plan's first derivatives are then exact). A Python bool or a
+        traced boolean; the default, ``False``, is always safe (``jmse`` then takes the
+        derivatives from the polar grid)."""
+        del field
+        return False
+
     def without_tilt(self) -> AbstractAberrations:
         """The same wavefront less its best-fit tilt (its projection on ``x`` and ``y``).
 
@@ -99,7 +108,7 @@ class Seidel(AbstractAberrations):
     --------
     >>> import jmse_jax
     >>> ab = jmse_jax.Seidel(w020=-2.75, w040=1.5578)
-    >>> float(jmse_jax.wavefront(ab, 0.0, 1.0, 0.0))  # -2.75 + 1.5578
+    >>> round(float(jmse_jax.wavefront(ab, 0.0, 1.0, 0.0)), 6)  # -2.75 + 1.5578
     -1.1922
     """
 
@@ -145,6 +154,13 @@ class Seidel(AbstractAberrations):
         # the answer matches the evaluated wavefront even when h**2 underflows.
         h = jnp.asarray(field)
         return (self.w131 * h == 0) & (self.w222 * (h * h) == 0)
+
+    def first_order_symmetric(self, field):
+        # On the axis every non-radial term carries a power of the field height h: a change
+        # of its coefficient does nothing, and a change of h adds w131 rho^2 y + w111 y
+        # (m = 1), which a rotation by pi flips, so it cannot change the merit at first
+        # order. Off the axis a change of w222 adds h^2 y^2 (half of it rho^2: defocus).
+        return jnp.asarray(field) == 0
 
     def without_tilt(self) -> Seidel:
         # Least-squares tilt of the y-odd terms: rho^2 y projects onto y with factor 2/3
@@ -244,11 +260,14 @@ class Zernike(AbstractAberrations):
             raise ValueError(
                 f"coefficients must be a 1-D array, got shape {tuple(coefficients.shape)}"
             )
+        if coefficients.shape[0] == 0:
+            raise ValueError("coefficients must hold at least one Zernike term, got none")
         if noll is None:
             noll = tuple(range(1, coefficients.shape[0] + 1))
-        noll = tuple(int(j) for j in np.atleast_1d(noll))
+        noll = tuple(np.atleast_1d(np.asarray(noll, dtype=object)).tolist())
         for j in noll:
             check_count("noll index", j)
+        noll = tuple(int(j) for j in noll)
         if len(noll) != coefficients.shape[0]:
             raise ValueError(
                 f"noll must list one index per coefficient: {len(noll)} indices for "
@@ -314,6 +333,8 @@ def wavefront(aberrations: AbstractAberrations, x, y, field=0.0):
         raise TypeError(
             f"aberrations must be a jmse_jax.Seidel or jmse_jax.Zernike, got {type(aberrations)}"
         )
+    check_finite_tree("aberrations", aberrations)
+    check_range("field", field, 0.0, 1.0)
     dtype = common_dtype(aberrations, x, y, field)
     x = jnp.asarray(x, dtype)
     y = jnp.asarray(y, dtype)

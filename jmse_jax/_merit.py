@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from typing import NamedTuple
 
 import jax
@@ -44,6 +45,7 @@ __all__ = [
     "OVERLAP_FLOOR",
     "PRESETS",
     "TierShortcut",
+    "CHECKED_STRENGTH",
     "U_MAX",
     "aberration_strength",
     "baseline_jmse",
@@ -53,6 +55,13 @@ __all__ = [
 
 #: Largest Nyquist ratio accepted: at u = 1.5 the band's corners lie past the cutoff.
 U_MAX = 1.5
+
+#: The largest ``aberration_strength`` at which the presets' accuracy was checked (the
+#: default's tiers are calibrated up to about this; README, "The adaptive default"). A
+#: concrete design beyond it gets a ``UserWarning`` from ``jmse``.
+CHECKED_STRENGTH = 25.0
+#: The same for rotationally symmetric designs, which take the one-ray plans (README).
+CHECKED_STRENGTH_ONE_RAY = 45.0
 
 
 class TierShortcut(NamedTuple):
@@ -221,8 +230,17 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
     options["overlap_floor"] = int(options["overlap_floor"])
     if options["quadrature"] == "polar":
         options["nodes"] = _pair("nodes", options["nodes"])
+        # One node at least on each of the three radial panels (``_quadrature``).
+        check_count("nodes[0] (radial nodes of the polar rule)", options["nodes"][0], 3)
         if options["se_nodes"] is not None:
             options["se_nodes"] = _pair("se_nodes", options["se_nodes"])
+            check_count("se_nodes[0] (radial nodes of the polar rule)",
+                        options["se_nodes"][0], 3)
+            if any(f < c for f, c in zip(options["se_nodes"], options["nodes"], strict=True)):
+                raise ValueError(
+                    f"se_nodes must be at least nodes in each direction (the OTF is "
+                    f"interpolated from nodes to the finer se_nodes), got se_nodes="
+                    f"{options['se_nodes']} with nodes={options['nodes']}")
     else:
         nodes = options["nodes"]
         if isinstance(nodes, (tuple, list)):
@@ -262,10 +280,11 @@ def _check_one_design(aberrations, field, u):
         named += [(f"aberrations.{name}", getattr(aberrations, name))
                   for name in Seidel.__dataclass_fields__]
     for name, value in named:
-        if jnp.ndim(value) != 0:
+        shape = tuple(value.shape) if hasattr(value, "shape") else np.shape(value)
+        if shape != ():
             raise ValueError(
-                f"{name} must be a scalar (one design), got shape {jnp.shape(value)}; for "
-                "many designs use jmse_jax.sweep_jmse or jax.vmap"
+                f"{name} must be a scalar (one design), got shape {shape}; for many designs "
+                "use jmse_jax.sweep_jmse or jax.vmap"
             )
 
 
@@ -625,6 +644,67 @@ def _tier_index(strength, u, tiers):
     return index
 
 
+def _plain_one_ray_merit(options, dtype, operands):
+    return radial_band_integral(*operands, options, dtype) / (2.0 * math.pi)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _one_ray_merit(static, operands):
+    """The merit along one ray (``options`` with ``_radial``; ``static.value`` is
+    ``(options, dtype)``), whose first derivatives are the one ray's own and whose second
+    derivatives are the polar grid's (the same options less ``_radial``).
+
+    Along one ray a first derivative is exact wherever the design stays symmetric to first
+    order (``_switched_merit_jvp`` sends the other designs to the polar grid), but a second
+    derivative is not: a perturbation that breaks the symmetry (the field on the axis moves
+    coma in) changes the merit at second order in ways the one ray cannot see (on the axis
+    of the Fig. 1 design ``d^2 J / d field^2`` came out +7.6e-3 against -4.9e-2).
+    """
+    options, dtype = static.value
+    return _plain_one_ray_merit(options, dtype, operands)
+
+
+def _live_tangents(d_operands):
+    """``(wrt, live)``: which leaves of ``d_operands`` carry a tangent, and those tangents."""
+    leaves = jax.tree_util.tree_leaves(d_operands, is_leaf=lambda x: isinstance(x, SymbolicZero))
+    wrt = tuple(not isinstance(t, SymbolicZero) for t in leaves)
+    return wrt, [t for t, w in zip(leaves, wrt, strict=True) if w]
+
+
+def _one_ray_merit_jvp(static, primals, tangents):
+    (operands,), (d_operands,) = primals, tangents
+    wrt, live = _live_tangents(d_operands)
+    value = _one_ray_merit(static, operands)
+    gradient = _one_ray_gradient(static, wrt, operands)
+    terms = [jnp.sum(g * t).astype(value.dtype) for g, t in zip(gradient, live, strict=True)]
+    return value, sum(terms, jnp.zeros_like(value))
+
+
+_one_ray_merit.defjvp(_one_ray_merit_jvp, symbolic_zeros=True)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
+def _one_ray_gradient(static, wrt, operands):
+    """The one ray's gradient in the leaves ``wrt`` of ``operands`` (a list); its
+    derivative is the polar grid's (see ``_one_ray_merit``)."""
+    options, dtype = static.value
+    return _value_and_grad(functools.partial(_plain_one_ray_merit, options, dtype),
+                           wrt)(operands)[1]
+
+
+@_one_ray_gradient.defjvp
+def _one_ray_gradient_jvp(static, wrt, primals, tangents):
+    (operands,), (d_operands,) = primals, tangents
+    options, dtype = static.value
+    plane = {k: v for k, v in options.items() if k != "_radial"}
+
+    def plane_gradient(ops):
+        return _value_and_grad(lambda o: _merit_value(plane, dtype, *o), wrt)(ops)[1]
+
+    _, d_gradient = jax.jvp(plane_gradient, (operands,), (d_operands,))
+    return _one_ray_gradient(static, wrt, operands), d_gradient
+
+
 def _merit_value(options, dtype, aberrations, field, u, signal, noise, estimate=False):
     """The merit on the grid of ``options``; with ``estimate``, ``(merit, estimate)`` with
     the relative interpolation-error estimate of ``_interpolation_estimate`` (the larger of
@@ -634,8 +714,7 @@ def _merit_value(options, dtype, aberrations, field, u, signal, noise, estimate=
                      or options["se_nodes"] is None):
         raise ValueError("an estimated grid needs the polar rule with se_nodes")
     if options.get("_radial"):  # a plan for rotationally symmetric designs (see jmse)
-        total = radial_band_integral(aberrations, field, u, signal, noise, options, dtype)
-        return total / (2.0 * math.pi)
+        return _one_ray_merit(_Static((options, dtype)), (aberrations, field, u, signal, noise))
     band = functools.partial(_band_integral, aberrations, field, u, signal, noise, options,
                              dtype, estimate=estimate)
     total = band(mirror=False)
@@ -781,10 +860,13 @@ def _switched_merit(static, index, operands):
     carry the residuals of every branch (many times the cost of the selected one). Here the
     selected branch computes its value and gradient together, and the tangent is their
     inner product with the input tangents, outside the switch (forward and reverse mode).
-    The gradient is that of the grid whose value is returned, except for a one-ray plan
-    taken because the values happen to be symmetric: its derivative would miss every
-    direction that breaks the symmetry (the one ray cannot see them), so the gradient comes
-    from the design's tier, whose grid covers the plane (and so do higher derivatives).
+    The gradient is that of the grid whose value is returned. A one-ray plan taken because
+    the values happen to be symmetric would miss the first-order effect of changes that
+    break the symmetry (the one ray cannot see them) unless every such change is harmless at
+    first order (a Seidel design on the axis: ``first_order_symmetric``); for the other
+    designs, the value and gradient under differentiation are the design's tier's (polar
+    grid). The one-ray plans' second derivatives are always the polar grid's
+    (``_one_ray_merit``).
 
     Under ``vmap`` (``_dispatch``) each tier runs, for the whole batch, only when one of
     the batch's designs selects it, and a shortcut's own grid only when one of them refuses
@@ -800,7 +882,6 @@ def _dispatch(plans, dtype, with_grad):
 
     ``with_grad`` is None for the value alone, else a tuple of booleans, one per leaf of the
     operands: the gradient (a list) is taken in the leaves marked True (``_value_and_grad``).
-    A plan may be ``None`` (values only): a zero, and nothing runs.
 
     ``vmap`` of a ``lax.switch`` or ``lax.cond`` whose index is batched evaluates every
     branch for every design and selects. The rule instead runs each tier, vectorised over
@@ -811,8 +892,7 @@ def _dispatch(plans, dtype, with_grad):
     gets alone; a batch of designs from one tier costs one tier.
     """
     if with_grad is None:
-        branches = [functools.partial(_tier_value, plan, dtype) if plan is not None
-                    else functools.partial(_no_value, dtype) for plan in plans]
+        branches = [functools.partial(_tier_value, plan, dtype) for plan in plans]
     else:
         branches = [functools.partial(_tier_value_and_grad, plan, dtype, with_grad)
                     for plan in plans]
@@ -847,20 +927,12 @@ def _dispatch(plans, dtype, with_grad):
         zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shape)
         out = zeros
         for tier, plan in enumerate(plans):
-            if plan is None:  # a value of zero (``_no_value``): the zeros stand
-                continue
             mask = index == tier
             result = _batched_tier(plan, dtype, with_grad, mask, operands, zeros)
             out = jax.tree_util.tree_map(functools.partial(_select, mask), result, out)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return run
-
-
-def _no_value(dtype, operands):
-    """The merit of the ``None`` plan of ``_dispatch``: nothing runs (a zero)."""
-    del operands
-    return jnp.zeros((), dtype)
 
 
 def _select(mask, chosen, other):
@@ -1091,13 +1163,17 @@ def _switched_merit_jvp(static, primals, tangents):
     if n_base is None:
         value, gradient = _dispatch(plans, dtype, with_grad=wrt)(index, operands)
     else:
-        # Gradient from the tier's plane grid; the value from the one-ray plan when it is
-        # the one taken (the last, None, plan: nothing runs for the others).
-        value, gradient = _dispatch(plans[:n_base], dtype, with_grad=wrt)(tier, operands)
-        n_ray = len(plans) - n_base
-        ray = jnp.where(index >= n_base, index - n_base, n_ray)
-        ray_value = _dispatch(plans[n_base:] + (None,), dtype, with_grad=None)(ray, operands)
-        value = jnp.where(index >= n_base, ray_value.astype(value.dtype), value)
+        # A one-ray plan taken because the values happen to be symmetric: its first
+        # derivatives hold only where every first-order change keeps the merit's change
+        # symmetric (``first_order_symmetric``: a Seidel design on the axis). Elsewhere the
+        # value and gradient are the design's tier's (polar grid): the value then differs
+        # from the one ray's by no more than that grid's error. (Taking the value from the
+        # one ray there too, by a second switch, cost 0.15 ms of every design's
+        # value_and_grad at the Fig. 1 point, one core: 1.37 -> 1.52 ms.)
+        aberrations, field = operands[0], operands[1]
+        own = (index >= n_base) & jnp.asarray(aberrations.first_order_symmetric(field), bool)
+        value, gradient = _dispatch(plans, dtype, with_grad=wrt)(
+            jnp.where(own, index, tier), operands)
     # Operands wider than the computation (a float64 signal in a float32 merit) contribute
     # in their own dtype; the tangent takes the value's.
     live = [t for t, w in zip(d_leaves, wrt, strict=True) if w]
@@ -1196,7 +1272,10 @@ def jmse(
 
     Notes
     -----
-    Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
+    A concrete design whose ``aberration_strength`` exceeds what the presets were checked
+    at (``CHECKED_STRENGTH``, 25; 45 for rotationally symmetric designs) gets a
+    ``UserWarning`` unless grid options are given. Discrete options are static (Python
+    values). Bad concrete input raises ``ValueError``;
     under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u``, the spectra's
     parameters) give ``+inf`` (never NaN) with zero gradient.
     Works in float32 and float64; the result follows the inputs' dtype.
@@ -1224,7 +1303,11 @@ def jmse(
                      otf_method=otf_method, overlap_nodes=overlap_nodes,
                      overlap_floor=overlap_floor, B=B))
     if is_concrete(inputs):
-        return _concrete_merit(static, inputs)[0]
+        # A preset's grids on a design stronger than they were checked at: a warning (the
+        # grid options, when given, are the user's own sizing).
+        preset_grid = all(v is None for v in (quadrature, nodes, se_nodes, otf_method,
+                                              overlap_nodes, overlap_floor))
+        return _concrete_merit(static, inputs, warn=preset_grid)[0]
     return _traced_merit(static, inputs)
 
 
@@ -1325,16 +1408,27 @@ def _concrete_choice(static, aberrations, field, u):
     """Tier index and radial symmetry (False if no one-ray plan applies) of a design."""
     aberrations = aberrations.without_tilt()
     symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
-    return _tier_of(static, aberrations, field, u), jnp.asarray(symmetric)
+    return (_tier_of(static, aberrations, field, u), jnp.asarray(symmetric),
+            _strength(aberrations, field, u))
 
 
-def _concrete_merit(static, inputs):
+def _concrete_merit(static, inputs, warn=False):
     """``jmse`` after validation, for concrete inputs: the plan this design takes is chosen
     first, and only the grids it needs are compiled (each once per process) and run.
-    Returns ``(value, tier index, one-ray plan taken, path)`` (``_eager_tier_choice``)."""
+    Returns ``(value, tier index, one-ray plan taken, path)`` (``_eager_tier_choice``);
+    ``warn``: a ``UserWarning`` when the design is stronger than the presets were checked at
+    (``CHECKED_STRENGTH``)."""
     dtype = static.value[3]
     plans = _base_plans(static)
-    index, symmetric = (int(x) for x in _concrete_choice(static, *inputs[:3]))
+    index, symmetric, strength = _concrete_choice(static, *inputs[:3])
+    index, symmetric, strength = int(index), int(symmetric), float(strength)
+    if warn and strength > (CHECKED_STRENGTH_ONE_RAY if symmetric else CHECKED_STRENGTH):
+        warnings.warn(
+            f"aberration_strength {strength:.3g} is beyond what the presets and the default's "
+            f"tiers were checked at: the JMSE may be far off. Give "
+            f"grids sized for it (nodes, se_nodes, overlap_nodes; see jmse's docstring and "
+            f"the README) and compare two of them (are the coefficients in waves?)",
+            UserWarning, stacklevel=3)
     plan = plans[index]
     if symmetric:
         radial_plans, split = _radial_plans(plans)

@@ -125,33 +125,61 @@ def lens_merit(
     tracing (``lens_status(lens).ok`` false); a concrete non-physical lens raises
     ``ValueError``.
     """
+    if not isinstance(lens, Lens):
+        raise TypeError(f"lens must be a jmse_jax.lens.Lens, got {type(lens)}")
     check_choice("merit", merit, MERITS)
     dtype = lens.ep_radius.dtype
-    fields = jnp.asarray(fields, dtype)
-    if fields.ndim != 1:
-        raise ValueError(f"fields must be a 1-D sequence, got shape {tuple(fields.shape)}")
-    check_range("fields", fields, 0.0, 1.0)
-    weights = jnp.ones_like(fields) if field_weights is None else jnp.asarray(field_weights,
-                                                                             dtype)
-    if weights.shape != fields.shape:
-        raise ValueError(
-            f"field_weights must have one weight per field ({fields.shape[0]}), "
-            f"got shape {tuple(weights.shape)}"
-        )
-    check_range("field_weights", weights, 0.0, None)
-    check_range("u", u, 0.0, 1.5, low_inclusive=False)
-    if wavelengths is not None:
-        for wl in wavelengths:
-            check_range("wavelengths", wl, 0.2, 20.0)
-        wavelengths = jnp.asarray(wavelengths, dtype)
+    fields, weights, wavelengths = _check_merit_arguments(
+        dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options)
     if is_concrete(lens):
         _raise_for(_status_jit(lens))
     if reference_scale is not None:
+        check_range("reference_scale", reference_scale, 0.0, None, low_inclusive=False)
         reference_scale = jnp.asarray(reference_scale, dtype)
     return _lens_merit_jit(
         lens, merit, jnp.asarray(u, dtype), signal, noise, fields, weights, wavelengths,
         reference_scale, _freeze(jmse_options),
     )
+
+
+def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavelengths,
+                           jmse_options):
+    """Checks of the arguments ``lens_merit`` and ``optimise`` share; returns ``fields``,
+    the field weights and ``wavelengths`` (None or a 1-D array) as arrays of ``dtype``."""
+    check_range("u", u, 0.0, 1.5, low_inclusive=False)
+    if np.ndim(u) != 0:
+        raise ValueError(f"u must be a scalar, got shape {np.shape(u)}")
+    if signal is not None and not isinstance(signal, AbstractSignal):
+        raise TypeError(f"signal must be a jmse_jax signal model, got {type(signal)}")
+    if noise is not None and not isinstance(noise, AbstractNoise):
+        raise TypeError(f"noise must be a jmse_jax noise model, got {type(noise)}")
+    if jmse_options is not None and not isinstance(jmse_options, dict):
+        raise TypeError(f"jmse_options must be a dict of jmse keyword options, "
+                        f"got {jmse_options!r}")
+    check_range("fields", fields, 0.0, 1.0)
+    fields = jnp.asarray(fields, dtype)
+    if fields.ndim != 1 or fields.shape[0] == 0:
+        raise ValueError(f"fields must be a non-empty 1-D sequence, got shape "
+                         f"{tuple(fields.shape)}")
+    if field_weights is None:
+        weights = jnp.ones_like(fields)
+    else:
+        check_range("field_weights", field_weights, 0.0, None)
+        weights = jnp.asarray(field_weights, dtype)
+        if weights.shape != fields.shape:
+            raise ValueError(
+                f"field_weights must have one weight per field ({fields.shape[0]}), "
+                f"got shape {tuple(weights.shape)}"
+            )
+        if is_concrete(weights) and not float(jnp.sum(weights)) > 0:
+            raise ValueError(f"field_weights must have a positive sum, got {field_weights!r}")
+    if wavelengths is not None:
+        check_range("wavelengths", wavelengths, 0.2, 20.0)
+        if np.ndim(wavelengths) != 1 or len(wavelengths) == 0:
+            raise ValueError(f"wavelengths must be a non-empty sequence of floats [µm], "
+                             f"got {wavelengths!r}")
+        wavelengths = jnp.asarray(wavelengths, dtype)
+    return fields, weights, wavelengths
 
 
 def _freeze(options) -> tuple:
@@ -513,6 +541,11 @@ def optimise(
         raise TypeError(f"lens must be a jmse_jax.lens.Lens, got {type(lens)}")
     check_choice("merit", merit, MERITS)
     check_count("max_steps", max_steps)
+    check_range("rtol", rtol, 0.0, None)
+    check_range("atol", atol, 0.0, None)
+    if isinstance(variables, str):
+        raise TypeError(f"variables must be a sequence of parameter names, got {variables!r}; "
+                        f"write ({variables!r},)")
     variables = tuple(variables)
     if not variables:
         raise ValueError("variables must name at least one lens parameter")
@@ -531,6 +564,13 @@ def optimise(
             raise ValueError(f"scales names {name!r}, which is not among variables {variables}")
         check_range(f"scales[{name!r}]", scales[name], 0.0, None, low_inclusive=False)
     dtype = lens.ep_radius.dtype
+    fields, field_weights, wavelengths = _check_merit_arguments(
+        dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options)
+    if bounds is not None and not isinstance(bounds, dict):
+        raise TypeError(f"bounds must be a dict name -> (low, high), got {bounds!r}")
+    for name, pair in (bounds or {}).items():
+        if not (isinstance(pair, (tuple, list)) and len(pair) == 2):
+            raise ValueError(f"bounds[{name!r}] must be a pair (low, high), got {pair!r}")
     scale_vector = jnp.asarray([scales.get(v, _default_scale(v)) for v in variables], dtype)
     signal = MarkovSignal(1.0, 5.0) if signal is None else signal
     noise = WhiteNoise(1e-3) if noise is None else noise
@@ -539,10 +579,7 @@ def optimise(
     reference_scale = lens.wavelength * _f_number_of(paraxial_trace(lens))
     problem = _Problem(
         parsed=parsed, merit=merit, jmse_items=jmse_items, scales=scale_vector,
-        fields=jnp.asarray(fields, dtype),
-        field_weights=(jnp.ones(len(fields), dtype) if field_weights is None
-                       else jnp.asarray(field_weights, dtype)),
-        wavelengths=None if wavelengths is None else jnp.asarray(wavelengths, dtype),
+        fields=fields, field_weights=field_weights, wavelengths=wavelengths,
         f_number=None if f_number is None else jnp.asarray(f_number, dtype),
         u=jnp.asarray(u, dtype), signal=signal, noise=noise,
         reference_scale=jnp.asarray(reference_scale, dtype),
@@ -603,5 +640,6 @@ def optimise(
         value=value, jmse=mean_jmse, jmse_per_field=per_field,
         rms_wavefront=math.sqrt(variance), start_jmse=start_jmse,
         start_rms_wavefront=math.sqrt(start_variance), iterations=iterations,
-        wall_time=wall_time, result=result, solver=solver_name, fields=tuple(fields),
+        wall_time=wall_time, result=result, solver=solver_name,
+        fields=tuple(float(f) for f in np.asarray(fields)),
     )

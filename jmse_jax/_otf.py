@@ -353,6 +353,8 @@ def otf_fft_grid(aberrations, field, B: int, dtype=None):
     Berkner & Shroff Sec. III-A: pupil ``B x B`` -> zero-pad to ``2B`` -> FFT -> PSF -> FFT.
     Normalised so that ``H[0, 0] = 1``.
     """
+    _check_aberrations(aberrations, field)
+    check_count("B", B)
     psf = pupil_psf(aberrations, field, B, dtype)
     lag = jnp.fft.ifft2(psf)
     return lag / jnp.real(lag[0, 0])

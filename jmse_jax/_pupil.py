@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._aberrations import AbstractAberrations, Zernike, noll_to_nm, wavefront, zernike_polynomial
-from ._numerics import EXACT, check_count, gauss_legendre
+from ._numerics import EXACT, check_count, check_finite_tree, gauss_legendre
 
 __all__ = ["PolarGrid", "SquareGrid", "sample_opd", "zernike_fit"]
 
@@ -115,9 +115,13 @@ def zernike_fit(samples, grid: PupilGrid, noll=None) -> Zernike:
     """
     if noll is None:
         noll = tuple(range(1, 16))
-    noll = tuple(int(j) for j in noll)
+    noll = tuple(noll)
+    if not noll:
+        raise ValueError("noll must name at least one Zernike term")
     for j in noll:
         check_count("noll index", j)
+    noll = tuple(int(j) for j in noll)
+    check_finite_tree("samples", samples)
     samples = jnp.asarray(samples)
     if samples.shape != grid.x.shape:
         raise ValueError(

@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import barycentric_matrix, check_choice, check_count, gauss_legendre
+from ._numerics import barycentric_matrix, check_choice, check_count, check_range, gauss_legendre
 
 __all__ = [
     "QUADRATURES",
@@ -349,11 +349,17 @@ def frequency_quadrature(rule: str, u, p, dtype=None):
     nu_x, nu_y, weights : flat arrays; ``sum(weights) = 4 u**2`` up to the rule's error.
     """
     check_choice("quadrature", rule, QUADRATURES)
+    check_range("u", u, 0.0, None, low_inclusive=False)
     dtype = dtype or jnp.result_type(float)
     u = jnp.asarray(u, dtype)
     if rule == "polar":
-        n_r, n_a = (p, p) if isinstance(p, (int, np.integer)) else p
-        check_count("nodes (radial)", n_r)
+        if isinstance(p, (int, np.integer)) and not isinstance(p, bool):
+            p = (p, p)
+        if not (isinstance(p, (tuple, list)) and len(p) == 2):
+            raise ValueError(f"p must be an int or a pair (radial, angular) for 'polar', "
+                             f"got {p!r}")
+        n_r, n_a = p
+        check_count("nodes (radial)", n_r, 3)
         check_count("nodes (angular)", n_a)
         panels = polar_panels(u, int(n_r), int(n_a), dtype)
         return (

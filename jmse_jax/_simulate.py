@@ -122,6 +122,15 @@ def _check_image(name, image):
         )
     if min(shape) < 1:
         raise ValueError(f"{name} must have at least one pixel per axis, got shape {shape}")
+    if is_concrete(image):
+        pixels = np.asarray(image)
+        if pixels.dtype.kind not in "iuf":
+            raise TypeError(f"{name} must hold real numbers, got dtype {pixels.dtype}")
+        bad = np.argwhere(~np.isfinite(pixels))
+        if bad.size:
+            y, x = (int(i) for i in bad[0])
+            raise ValueError(f"{name} must be finite, got {pixels[y, x]} at pixel (y={y}, "
+                             f"x={x}) and {len(bad) - 1} more")
 
 
 def _check_shape(shape):

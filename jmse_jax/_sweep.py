@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from ._aberrations import Seidel
 from ._merit import U_MAX, jmse, jmse_options
 from ._numerics import check_count
 
@@ -785,6 +786,22 @@ def sweep_jmse(
     ((6,), {'OK': 6})
     """
     jmse_options(preset, **options)  # ValueError now for a bad option
+    # Lists become arrays (a list would be read as a pytree of separate scalar leaves).
+    aberrations = jax.tree_util.tree_map(
+        lambda x: np.asarray(x, float) if isinstance(x, (list, tuple)) else x, aberrations,
+        is_leaf=lambda x: isinstance(x, (list, tuple)))
+    named = [("field", field), ("u", u)]
+    if isinstance(aberrations, Seidel):
+        named += [(f"aberrations.{name}", getattr(aberrations, name))
+                  for name in Seidel.__dataclass_fields__]
+    for name, value in named:
+        if isinstance(value, (list, tuple)):
+            value = np.asarray(value, float)
+        if np.ndim(value) > 1:
+            raise ValueError(f"{name} must be a scalar or a 1-D array (one value per design), "
+                             f"got shape {np.shape(value)}")
+    field = np.asarray(field, float) if isinstance(field, (list, tuple)) else field
+    u = np.asarray(u, float) if isinstance(u, (list, tuple)) else u
 
     def merit(design):
         return jmse(design["aberrations"], design["field"], design["u"], signal, noise,

@@ -94,6 +94,19 @@ def _positive(name, value) -> float:
     return value
 
 
+def _check_out(path) -> None:
+    """``UsageError`` now, before any computation, when ``path`` cannot be written."""
+    if not path:
+        return
+    directory = os.path.dirname(os.path.abspath(path))
+    try:
+        os.makedirs(directory, exist_ok=True)
+    except OSError as e:
+        raise UsageError(f"--out-json: cannot create {directory} ({e.strerror})") from None
+    if os.path.isdir(path) or not os.access(directory, os.W_OK):
+        raise UsageError(f"--out-json: cannot write {path}")
+
+
 def _write_json(path, data):
     directory = os.path.dirname(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)
@@ -144,8 +157,16 @@ def eval_inputs(args) -> dict:
                          f"got {settings['preset']!r}")
     _positive("noise", settings["noise"])
     nu = settings["nu"]
-    settings["nu"] = (_floats(nu, "nu") if isinstance(nu, str)
-                      else [float(v) for v in (nu if isinstance(nu, list) else [nu])])
+    if isinstance(nu, str):
+        settings["nu"] = _floats(nu, "nu")
+    else:
+        try:
+            settings["nu"] = [float(v) for v in (nu if isinstance(nu, list) else [nu])]
+        except (TypeError, ValueError):
+            raise UsageError(f"nu must be a number or a list of numbers (cutoff units), "
+                             f"got {nu!r}") from None
+        if not all(math.isfinite(v) for v in settings["nu"]):
+            raise UsageError(f"nu must be finite, got {nu!r}")
     if not all(0.0 <= v for v in settings["nu"]):
         raise UsageError(f"nu must be >= 0 (cutoff units), got {settings['nu']}")
     return settings
@@ -183,6 +204,7 @@ def evaluate(settings: dict) -> dict:
 
 
 def _cmd_eval(args) -> int:
+    _check_out(args.out_json)
     settings = eval_inputs(args)
     result = evaluate(settings)
     inp = result["inputs"]
@@ -216,6 +238,7 @@ def _cmd_optimise(args) -> int:
     import jmse_jax as jj
     from jmse_jax import lens as jl
 
+    _check_out(args.out_json)
     lo, hi = jl.PAPER_SINGLET["front_curvature_range"]
     if not lo <= args.front_curvature <= hi:
         raise UsageError(f"--front-curvature must be in [{lo}, {hi}] 1/mm, "
@@ -362,6 +385,9 @@ def builtin_bench(repeats: int = 5) -> dict:
 
 def _cmd_bench(args) -> int:
     if args.builtin:
+        if args.repeats < 1:
+            raise UsageError(f"--repeats must be an integer >= 1, got {args.repeats}")
+        _check_out(args.out_json)
         result = builtin_bench(args.repeats)
         if args.out_json:
             _write_json(args.out_json, result)
@@ -562,10 +588,13 @@ def main(argv=None) -> int:
         _enable_compile_cache(jax)
     try:
         return args.func(args)
-    except ValueError as e:
-        # UsageError and the library's validation errors: one line, exit status 2.
+    except (ValueError, TypeError) as e:
+        # UsageError and the library's validation errors (TypeError: a value of the wrong
+        # kind, e.g. in a --json file): one line, exit status 2.
         message = " ".join(str(e).split())
         parser.exit(2, f"jmse-jax: error: {message}\n")
+    except OSError as e:  # a file that cannot be read or written
+        parser.exit(1, f"jmse-jax: error: {e}\n")
 
 
 if __name__ == "__main__":

@@ -68,12 +68,23 @@ def test_help_mentions_units(capsys, command, words):
     ("sweep", "--axis", "w020=-1,1,200", "--axis", "w222=-1,1,200"),
     ("sweep", "--workers", "0"),
     ("sweep", "--batch-size", "0"),
+    ("bench", "--builtin", "--repeats", "0"),
+    ("eval", "--out-json", "/proc/no/such/folder/x.json"),
 ])
 def test_bad_arguments_exit_2_with_one_line(capsys, argv):
     status, out, err = run_cli(capsys, *argv)
     assert status == 2
     assert len(err.strip().splitlines()) == 1, err
     assert err.startswith("jmse-jax: error: ")
+
+
+@pytest.mark.parametrize("nu", [[0.1, None], {"a": 1}, [0.1, "a"]])
+def test_eval_json_with_bad_nu_exits_2_naming_nu(capsys, tmp_path, nu):
+    path = tmp_path / "in.json"
+    path.write_text(json.dumps({"w020": 1.0, "nu": nu}))
+    status, _, err = run_cli(capsys, "eval", "--json", str(path))
+    assert status == 2 and len(err.strip().splitlines()) == 1
+    assert err.startswith("jmse-jax: error: nu must be a number or a list of numbers")
 
 
 def test_eval_json_with_unknown_key_exits_2(capsys, tmp_path):

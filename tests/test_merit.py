@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -294,6 +295,15 @@ def _call(fig1, fn=jj.jmse, **changes):
          r"aberrations\.w020 must be finite, got nan"),
         (dict(aberrations=jj.Seidel(w222=float("inf"))),
          r"aberrations\.w222 must be finite, got inf"),
+        (dict(nodes=(2, 8)), r"nodes\[0\] \(radial nodes of the polar rule\) must be an "
+                             r"integer >= 3, got 2"),
+        (dict(nodes=(16, 8), se_nodes=(16, 4)), r"se_nodes must be at least nodes"),
+        (dict(nodes=(16, 8), se_nodes=(2, 16)), r"se_nodes\[0\] .* must be an integer >= 3"),
+        (dict(field=np.array([0.5, 0.6])), r"field must be a scalar \(one design\), got "
+                                           r"shape \(2,\); for many designs use"),
+        (dict(u=[0.2]), r"u must be a scalar \(one design\), got shape \(1,\)"),
+        (dict(aberrations=jj.Seidel(w020=np.ones(2))),
+         r"aberrations\.w020 must be a scalar \(one design\), got shape \(2,\)"),
     ],
 )
 def test_jmse_bad_input_raises(fig1, changes, match):
@@ -321,6 +331,54 @@ def test_unknown_option_raises(fig1):
         jj.jmse_options(bogus=1)
 
 
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        (dict(field="0.5"), r"field must be a real number \(or array of them\), got '0\.5'"),
+        (dict(u=None), r"u must be a real number \(or array of them\), got None"),
+        (dict(u=True), r"u must be a real number"),
+        (dict(aberrations=jj.Seidel(w020="abc")),
+         r"aberrations\.w020 must be a real number \(or array of them\), got 'abc'"),
+    ],
+)
+def test_jmse_wrong_kind_of_input_raises_type_error(fig1, changes, match):
+    with pytest.raises(TypeError, match=match):
+        _call(fig1, **changes)
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [dict(u=-0.1), dict(u=0.0), dict(u=1.6), dict(field=1.5), dict(field=-0.2),
+     dict(noise=-1e-3), dict(noise=0.0), dict(variance=-1.0), dict(mu=-5.0)],
+    ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()),
+)
+def test_out_of_range_under_jit_is_inf_with_zero_gradient(fig1, changes):
+    """Traced values cannot raise: out of range they give +inf (not a plausible number, nor
+    a negative MSE for a negative noise), with a zero (finite) gradient, in jmse and in the
+    baseline alike."""
+    ab, field, u, _, _ = fig1
+    point = dict(field=field, u=u, noise=1e-3, variance=1.0, mu=5.0)
+    fast = jmse_fn(preset="fast")
+
+    def merit(p, fn=fast):
+        return fn(ab, p["field"], p["u"], jj.MarkovSignal(p["variance"], p["mu"]),
+                  jj.WhiteNoise(p["noise"]))
+
+    bad = {k: jnp.asarray(v, jnp.float64) for k, v in {**point, **changes}.items()}
+    value, grad = jax.jit(jax.value_and_grad(merit))(bad)
+    assert float(value) == math.inf
+    assert all(float(g) == 0.0 for g in grad.values())
+    good = {k: jnp.asarray(v, jnp.float64) for k, v in point.items()}
+    assert math.isfinite(float(jax.jit(merit)(good)))
+
+    def baseline(p):
+        return jj.baseline_jmse(ab, p["field"], p["u"], jj.MarkovSignal(p["variance"], p["mu"]),
+                                jj.WhiteNoise(p["noise"]), B=16)
+
+    assert float(jax.jit(baseline)(bad)) == math.inf
+    assert math.isfinite(float(jax.jit(baseline)(good)))
+
+
 @pytest.mark.parametrize("bad", [float("nan"), float("inf")])
 def test_non_finite_under_jit_is_inf_not_nan(fig1, bad):
     ab, field, u, signal, noise = fig1
@@ -331,3 +389,20 @@ def test_non_finite_under_jit_is_inf_not_nan(fig1, bad):
                                    signal, noise))(jnp.asarray(bad))
     assert not np.isnan(float(grad))
     assert float(fast(ab, jnp.asarray(bad), u, signal, noise)) == math.inf
+
+
+def test_design_beyond_the_checked_strength_warns():
+    """Coefficients given in the wrong unit (nm for waves, say) make a design far stronger
+    than any preset was checked at: the value may be far off, so a concrete call warns. No
+    warning with grids of the caller's own, nor below the bound."""
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    strong = jj.Seidel(w020=300.0, w131=2.0)  # strength 426 at u = 0.5
+    assert float(jj.aberration_strength(strong, 0.5, 0.5)) > jj.CHECKED_STRENGTH
+    with pytest.warns(UserWarning, match=r"aberration_strength 426 is beyond what the "
+                                         r"presets and the default's tiers were checked at"):
+        jj.jmse(strong, 0.5, 0.5, signal, noise, preset="fast")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jj.jmse(strong, 0.5, 0.5, signal, noise, nodes=(8, 4), se_nodes=(16, 8),
+                overlap_nodes=(8, 8))
+        jj.jmse(jj.Seidel(w020=2.0, w131=0.5), 0.5, 0.5, signal, noise, preset="fast")

@@ -183,6 +183,33 @@ def test_glass_parameters_are_optimisation_variables():
     assert result.rms_wavefront < result.start_rms_wavefront
 
 
+def test_optimise_checks_the_merit_arguments_before_running():
+    """The arguments optimise shares with lens_merit are checked alike, before any step."""
+    lens = start_design()
+    cases = [
+        (dict(u=2.0), ValueError, r"u must be in \(0\.0, 1\.5\], got 2\.0"),
+        (dict(u=float("nan")), ValueError, r"u must be finite and in \(0\.0, 1\.5\]"),
+        (dict(fields=(1.5,)), ValueError, r"fields must be in \[0\.0, 1\.0\], got \[1\.5\]"),
+        (dict(fields=()), ValueError, r"fields must be a non-empty 1-D sequence"),
+        (dict(field_weights=(0, 0, 0)), ValueError, r"field_weights must have a positive sum"),
+        (dict(wavelengths=[50.0]), ValueError, r"wavelengths must be in \[0\.2, 20\.0\]"),
+        (dict(wavelengths=0.55), ValueError, r"wavelengths must be a non-empty sequence"),
+        (dict(signal="markov"), TypeError, r"signal must be a jmse_jax signal model"),
+        (dict(jmse_options=["fast"]), TypeError, r"jmse_options must be a dict"),
+    ]
+    for changes, kind, match in cases:
+        for fn in (lambda **kw: lens_merit(lens, **kw),
+                   lambda **kw: optimise(lens, ("image_shift",), **kw)):
+            with pytest.raises(kind, match=match):
+                fn(**changes)
+    with pytest.raises(ValueError, match=r"reference_scale must be in \(0\.0, inf\]"):
+        lens_merit(lens, reference_scale=-2.0)
+    with pytest.raises(TypeError, match=r"variables must be a sequence of parameter names"):
+        optimise(lens, "image_shift")
+    with pytest.raises(ValueError, match=r"bounds\['image_shift'\] must be a pair"):
+        optimise(lens, ("image_shift",), bounds={"image_shift": 1.0})
+
+
 def test_optimise_argument_errors():
     lens = start_design()
     with pytest.raises(ValueError, match="does not name a lens parameter"):

@@ -236,6 +236,16 @@ def test_restore_rejects_non_2d_images(image):
         jj.restore(image, FIG1, 0.95, 0.2, MARKOV, NOISE)
 
 
+@pytest.mark.parametrize("pixel", [float("nan"), float("inf")])
+def test_non_finite_pixels_are_rejected(pixel):
+    image = np.zeros((8, 8))
+    image[2, 5] = pixel
+    with pytest.raises(ValueError, match=r"image must be finite, got .* at pixel \(y=2, x=5\)"):
+        jj.restore(image, FIG1, 0.95, 0.2, MARKOV, NOISE)
+    with pytest.raises(ValueError, match=r"scene must be finite"):
+        jj.simulate_capture(image, FIG1, 0.95, 0.2, NOISE, jax.random.key(0))
+
+
 @pytest.mark.parametrize("u", [0.0, -0.1, 2.0, float("nan")])
 def test_restore_rejects_u_outside_range(u):
     with pytest.raises(ValueError, match=r"u must be .*\(0\.0, 1\.5\]"):

@@ -370,3 +370,20 @@ def test_sharded_result_in_input_order_and_equal_to_loop(four_device_results):
         np.testing.assert_allclose(sharded.value[i], value, rtol=1e-12)
         np.testing.assert_allclose(sharded.grad["aberrations"].w020[i], d_ab.w020, rtol=1e-9)
         np.testing.assert_allclose(sharded.grad["field"][i], d_field, rtol=1e-9, atol=1e-15)
+
+
+def test_sweep_jmse_takes_lists_as_arrays():
+    """Lists for the coefficients, field and u mean one value per design, as arrays do (a
+    list leaf used to be read as separate scalar leaves); a 2-D leaf is a clear error."""
+    w020, field = [0.5, -1.0], [0.5, 0.6]
+    listed = jj.sweep_jmse(jj.Seidel(w020=w020, w222=0.3), field, [0.2, 0.25], SIGNAL, NOISE,
+                           progress=False, **CHEAP)
+    arrays = jj.sweep_jmse(jj.Seidel(w020=np.asarray(w020), w222=0.3), np.asarray(field),
+                           np.asarray([0.2, 0.25]), SIGNAL, NOISE, progress=False, **CHEAP)
+    np.testing.assert_array_equal(listed.value, arrays.value)
+    assert listed.status_counts() == {"OK": 2}
+    single = jj.jmse(jj.Seidel(w020=-1.0, w222=0.3), 0.6, 0.25, SIGNAL, NOISE, **CHEAP)
+    assert listed.value[1] == pytest.approx(float(single), rel=1e-12)
+    with pytest.raises(ValueError, match=r"aberrations\.w020 must be a scalar or a 1-D array"):
+        jj.sweep_jmse(jj.Seidel(w020=np.ones((2, 2))), 0.5, 0.2, SIGNAL, NOISE, progress=False,
+                      **CHEAP)

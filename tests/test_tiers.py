@@ -570,9 +570,9 @@ def test_float32_rounds_the_order_along_the_chords_to_a_multiple_of_8(monkeypatc
     orders = set()
     original = _otf._otf_overlap_flat
 
-    def spy(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype_):
+    def spy(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype_, *rest):
         orders.add((n_phi, n_t))
-        return original(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype_)
+        return original(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype_, *rest)
 
     monkeypatch.setattr(_otf, "_otf_overlap_flat", spy)
     ab, field, u, _ = DESIGNS[1]
