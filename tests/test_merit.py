@@ -358,25 +358,31 @@ def test_out_of_range_under_jit_is_inf_with_zero_gradient(fig1, changes):
     baseline alike."""
     ab, field, u, _, _ = fig1
     point = dict(field=field, u=u, noise=1e-3, variance=1.0, mu=5.0)
-    fast = jmse_fn(preset="fast")
-
-    def merit(p, fn=fast):
-        return fn(ab, p["field"], p["u"], jj.MarkovSignal(p["variance"], p["mu"]),
-                  jj.WhiteNoise(p["noise"]))
-
     bad = {k: jnp.asarray(v, jnp.float64) for k, v in {**point, **changes}.items()}
-    value, grad = jax.jit(jax.value_and_grad(merit))(bad)
+    value, grad = _range_value_and_grad(ab, bad)
     assert float(value) == math.inf
     assert all(float(g) == 0.0 for g in grad.values())
     good = {k: jnp.asarray(v, jnp.float64) for k, v in point.items()}
-    assert math.isfinite(float(jax.jit(merit)(good)))
+    assert math.isfinite(float(_range_value_and_grad(ab, good)[0]))
+    assert float(_range_baseline(ab, bad)) == math.inf
+    assert math.isfinite(float(_range_baseline(ab, good)))
 
-    def baseline(p):
-        return jj.baseline_jmse(ab, p["field"], p["u"], jj.MarkovSignal(p["variance"], p["mu"]),
-                                jj.WhiteNoise(p["noise"]), B=16)
 
-    assert float(jax.jit(baseline)(bad)) == math.inf
-    assert math.isfinite(float(jax.jit(baseline)(good)))
+def _spectra(p):
+    return jj.MarkovSignal(p["variance"], p["mu"]), jj.WhiteNoise(p["noise"])
+
+
+@jax.jit
+def _range_value_and_grad(ab, p):
+    """value_and_grad of the fast preset in field, u and the spectra's parameters (one
+    compilation for every case of the test above)."""
+    return jax.value_and_grad(
+        lambda p: jj.jmse(ab, p["field"], p["u"], *_spectra(p), preset="fast"))(p)
+
+
+@jax.jit
+def _range_baseline(ab, p):
+    return jj.baseline_jmse(ab, p["field"], p["u"], *_spectra(p), B=16)
 
 
 @pytest.mark.parametrize("bad", [float("nan"), float("inf")])

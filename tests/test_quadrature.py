@@ -152,7 +152,7 @@ def test_split_angular_rule(u):
         ("bogus", 4, r"quadrature must be one of 'polar', .*, got 'bogus'"),
         ("gauss", 0, r"p must be an integer >= 1, got 0"),
         ("rectangle", -2, r"p must be an integer >= 1, got -2"),
-        ("polar", (0, 4), r"nodes \(radial\) must be an integer >= 1, got 0"),
+        ("polar", (0, 4), r"nodes \(radial\) must be an integer >= 3, got 0"),
         ("polar", (4, 0), r"nodes \(angular\) must be an integer >= 1, got 0"),
         ("trapezoid", 1, r"p must be >= 2 for the trapezoid rule, got 1"),
     ],
