@@ -58,7 +58,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._aberrations import AbstractAberrations
-from ._merit import U_MAX, jmse
+from ._merit import U_MAX, _sanitise, jmse
 from ._numerics import (
     abs2,
     check_choice,
@@ -486,14 +486,16 @@ def predicted_pixel_mse(
                          f"got {size}")
     otf_nodes = _check_nodes(otf_nodes)
     dtype = common_dtype(aberrations, field, u, signal, noise)
-    u = jnp.asarray(u, dtype)
+    # Under jit: +inf for non-finite or out-of-range values, as jmse gives.
+    (aberrations, field, u, signal, noise), ok = _sanitise(
+        (aberrations, jnp.asarray(field, dtype), jnp.asarray(u, dtype), signal, noise))
     shape = (int(size), int(size))
     nu_x, nu_y, spacing = _grid(shape, u, dtype)
     s_n = noise(nu_x, nu_y)
     _check_positive_psd("noise PSD", s_n)
-    h = _otf_on_grid(aberrations, jnp.asarray(field, dtype), spacing, shape, otf_nodes, dtype)
+    h = _otf_on_grid(aberrations, field, spacing, shape, otf_nodes, dtype)
     s_e = error_spectral_density(h, signal(nu_x, nu_y), s_n)
-    return spacing[0] * spacing[1] * jnp.sum(s_e)
+    return jnp.where(ok, spacing[0] * spacing[1] * jnp.sum(s_e), jnp.inf)
 
 
 # --------------------------------------------------------------------------------------

@@ -279,3 +279,15 @@ def test_random_scene_rejects_bad_shape():
         jj.random_scene(MARKOV, (8,), 0.2, jax.random.key(0))
     with pytest.raises(ValueError, match=r"shape\[1\] \(n_x\) must be an integer >= 1"):
         jj.random_scene(MARKOV, (8, 0), 0.2, jax.random.key(0))
+
+
+@pytest.mark.parametrize("size", [None, 33])
+def test_predicted_pixel_mse_under_jit_is_inf_for_bad_noise(size):
+    """Traced values cannot raise: a noise variance <= 0 gives +inf (not NaN, nor a negative
+    MSE), on the DFT grid as through jmse."""
+    merit = jax.jit(lambda v: jj.predicted_pixel_mse(FIG1, 0.95, 0.2, MARKOV, jj.WhiteNoise(v),
+                                                     size=size, jmse_preset="fast"))
+    assert np.isposinf(float(merit(-1e-3))) and np.isposinf(float(merit(0.0)))
+    expected = jj.predicted_pixel_mse(FIG1, 0.95, 0.2, MARKOV, NOISE, size=size,
+                                      jmse_preset="fast")
+    assert float(merit(float(NOISE.variance))) == pytest.approx(float(expected), rel=1e-12)
