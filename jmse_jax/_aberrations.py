@@ -231,6 +231,18 @@ def zernike_polynomial(j: int, x, y):
     return math.sqrt(2 * (n + 1)) * radial * angular
 
 
+def noll_indices(noll) -> tuple[int, ...]:
+    """``noll`` (a sequence or array of Noll indices) as a tuple of ints, each checked to be
+    an integer >= 1 (integer-valued floats pass; 4.7 does not)."""
+    out = []
+    for j in np.atleast_1d(np.asarray(noll)).tolist():
+        if isinstance(j, float) and j.is_integer():
+            j = int(j)
+        check_count("noll index", j)
+        out.append(int(j))
+    return tuple(out)
+
+
 class Zernike(AbstractAberrations):
     """Wavefront as a sum of Noll-indexed Zernike polynomials, coefficients in waves (RMS).
 
@@ -264,10 +276,7 @@ class Zernike(AbstractAberrations):
             raise ValueError("coefficients must hold at least one Zernike term, got none")
         if noll is None:
             noll = tuple(range(1, coefficients.shape[0] + 1))
-        noll = tuple(np.atleast_1d(np.asarray(noll, dtype=object)).tolist())
-        for j in noll:
-            check_count("noll index", j)
-        noll = tuple(int(j) for j in noll)
+        noll = noll_indices(noll)
         if len(noll) != coefficients.shape[0]:
             raise ValueError(
                 f"noll must list one index per coefficient: {len(noll)} indices for "

@@ -307,7 +307,9 @@ def _sanitise(inputs):
     aberrations, field, u, signal, noise = inputs
     leaves = jax.tree_util.tree_leaves(inputs)
     ok = jnp.all(jnp.stack([jnp.all(jnp.isfinite(leaf)) for leaf in leaves]))
-    ok = (ok & (field >= 0) & (field <= 1) & (u > 0) & (u <= U_MAX)
+    # No upper bound on u here: the merit is defined for any band, and lens_merit passes
+    # bands past U_MAX (u scaled to other wavelengths); concrete calls are checked.
+    ok = (ok & (field >= 0) & (field <= 1) & (u > 0)
           & jnp.asarray(signal.valid(), bool) & jnp.asarray(noise.valid(), bool))
     stand_in = (
         jax.tree_util.tree_map(jnp.zeros_like, aberrations),

@@ -14,7 +14,14 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from ._aberrations import AbstractAberrations, Zernike, noll_to_nm, wavefront, zernike_polynomial
+from ._aberrations import (
+    AbstractAberrations,
+    Zernike,
+    noll_indices,
+    noll_to_nm,
+    wavefront,
+    zernike_polynomial,
+)
 from ._numerics import EXACT, check_count, check_finite_tree, gauss_legendre
 
 __all__ = ["PolarGrid", "SquareGrid", "sample_opd", "zernike_fit"]
@@ -115,12 +122,9 @@ def zernike_fit(samples, grid: PupilGrid, noll=None) -> Zernike:
     """
     if noll is None:
         noll = tuple(range(1, 16))
-    noll = tuple(noll)
+    noll = noll_indices(noll)
     if not noll:
         raise ValueError("noll must name at least one Zernike term")
-    for j in noll:
-        check_count("noll index", j)
-    noll = tuple(int(j) for j in noll)
     check_finite_tree("samples", samples)
     samples = jnp.asarray(samples)
     if samples.shape != grid.x.shape:

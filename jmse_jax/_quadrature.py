@@ -353,6 +353,8 @@ def frequency_quadrature(rule: str, u, p, dtype=None):
     dtype = dtype or jnp.result_type(float)
     u = jnp.asarray(u, dtype)
     if rule == "polar":
+        if isinstance(p, np.ndarray):
+            p = p.tolist()
         if isinstance(p, (int, np.integer)) and not isinstance(p, bool):
             p = (p, p)
         if not (isinstance(p, (tuple, list)) and len(p) == 2):

@@ -4,6 +4,7 @@ a field outside [0, 1], a pair where an int was meant)."""
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -52,6 +53,10 @@ def test_good_input_still_passes():
     scalar p for the polar rule, a field of exactly 0 or 1."""
     ab = jj.Zernike(np.array([0.5, 0.2]), noll=np.array([4, 11]))
     assert ab.noll == (4, 11)
+    assert jj.Zernike([0.1] * 3, noll=(1.0, 2.0, 4.0)).noll == (1, 2, 4)
+    fit = jj.zernike_fit(np.zeros(jj.PolarGrid().x.shape), jj.PolarGrid(), noll=jnp.arange(1, 6))
+    assert fit.noll == (1, 2, 3, 4, 5)
+    assert jj.frequency_quadrature("polar", 0.3, np.array([8, 6]))[0].shape == (192,)
     nu_x, _, weights = jj.frequency_quadrature("polar", 0.2, 4)
     assert nu_x.shape == weights.shape == (64,)
     assert float(np.sum(weights)) == pytest.approx(4 * 0.2**2, rel=1e-5)  # the band's area

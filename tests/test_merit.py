@@ -348,7 +348,7 @@ def test_jmse_wrong_kind_of_input_raises_type_error(fig1, changes, match):
 
 @pytest.mark.parametrize(
     "changes",
-    [dict(u=-0.1), dict(u=0.0), dict(u=1.6), dict(field=1.5), dict(field=-0.2),
+    [dict(u=-0.1), dict(u=0.0), dict(field=1.5), dict(field=-0.2),
      dict(noise=-1e-3), dict(noise=0.0), dict(variance=-1.0), dict(mu=-5.0)],
     ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()),
 )
@@ -412,3 +412,17 @@ def test_design_beyond_the_checked_strength_warns():
         jj.jmse(strong, 0.5, 0.5, signal, noise, nodes=(8, 4), se_nodes=(16, 8),
                 overlap_nodes=(8, 8))
         jj.jmse(jj.Seidel(w020=2.0, w131=0.5), 0.5, 0.5, signal, noise, preset="fast")
+
+
+def test_traced_band_past_u_max_is_computed(fig1):
+    """Under jit a band past U_MAX is computed, not +inf: lens_merit scales u to other
+    wavelengths (u s, s = lambda N / reference) and may pass 1.5. The merit grows with the
+    band (S_e > 0)."""
+    ab, field, _, _, _ = fig1
+    point = dict(field=field, noise=1e-3, variance=1.0, mu=5.0)
+    values = [float(_range_value_and_grad(ab, {**{k: jnp.asarray(v, jnp.float64)
+                                                 for k, v in point.items()},
+                                              "u": jnp.asarray(u, jnp.float64)})[0])
+              for u in (1.4, 1.5, 1.6)]
+    assert all(math.isfinite(v) for v in values)
+    assert values[0] < values[1] < values[2]
