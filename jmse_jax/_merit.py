@@ -673,13 +673,18 @@ def _live_tangents(d_operands):
     return wrt, [t for t, w in zip(leaves, wrt, strict=True) if w]
 
 
+def _tangent(value, gradient, live):
+    """``sum_i <gradient_i, live_i>`` in ``value``'s dtype (operands wider than the
+    computation, a float64 signal in a float32 merit, contribute in their own dtype)."""
+    terms = [jnp.sum(g * t).astype(value.dtype) for g, t in zip(gradient, live, strict=True)]
+    return sum(terms, jnp.zeros_like(value))
+
+
 def _one_ray_merit_jvp(static, primals, tangents):
     (operands,), (d_operands,) = primals, tangents
     wrt, live = _live_tangents(d_operands)
     value = _one_ray_merit(static, operands)
-    gradient = _one_ray_gradient(static, wrt, operands)
-    terms = [jnp.sum(g * t).astype(value.dtype) for g, t in zip(gradient, live, strict=True)]
-    return value, sum(terms, jnp.zeros_like(value))
+    return value, _tangent(value, _one_ray_gradient(static, wrt, operands), live)
 
 
 _one_ray_merit.defjvp(_one_ray_merit_jvp, symbolic_zeros=True)
@@ -1158,10 +1163,8 @@ def _switched_merit_jvp(static, primals, tangents):
     # ``jacfwd``) and un-jitted reverse mode would otherwise form the gradient in ``u``, the
     # field and the spectra too (through every node's position), which only a jitted
     # ``value_and_grad`` lets XLA drop.
-    d_leaves = jax.tree_util.tree_leaves(d_operands,
-                                         is_leaf=lambda x: isinstance(x, SymbolicZero))
     # (JAX calls this rule only when some tangent is nonzero.)
-    wrt = tuple(not isinstance(t, SymbolicZero) for t in d_leaves)
+    wrt, live = _live_tangents(d_operands)
     if n_base is None:
         value, gradient = _dispatch(plans, dtype, with_grad=wrt)(index, operands)
     else:
@@ -1176,12 +1179,7 @@ def _switched_merit_jvp(static, primals, tangents):
         own = (index >= n_base) & jnp.asarray(aberrations.first_order_symmetric(field), bool)
         value, gradient = _dispatch(plans, dtype, with_grad=wrt)(
             jnp.where(own, index, tier), operands)
-    # Operands wider than the computation (a float64 signal in a float32 merit) contribute
-    # in their own dtype; the tangent takes the value's.
-    live = [t for t, w in zip(d_leaves, wrt, strict=True) if w]
-    terms = [jnp.sum(g * t).astype(value.dtype)
-             for g, t in zip(gradient, live, strict=True)]
-    return value, sum(terms, jnp.zeros_like(value))
+    return value, _tangent(value, gradient, live)
 
 
 _switched_merit.defjvp(_switched_merit_jvp, symbolic_zeros=True)
@@ -1353,9 +1351,9 @@ def _tier_of(static, aberrations, field, u):
 
 
 def _plans_and_index(static, aberrations, field, u):
-    """All plans of ``static``, the index of the one this design takes, and the number of
-    plans before the one-ray plans when the choice of those depends on the values (else
-    None), all traceable.
+    """All plans of ``static``, the index of the one this design takes, its tier (the index
+    among the plans before the one-ray ones) and the number of those plans when the choice
+    of a one-ray plan depends on the values (else None), all traceable.
 
     A one-ray plan chosen because the values happen to be symmetric (coma and astigmatism
     zero off the axis, or on the axis at all) gives the right value but not the right
@@ -1363,7 +1361,7 @@ def _plans_and_index(static, aberrations, field, u):
     rule then takes the gradient from the design's own tier (``_switched_merit_jvp``).
     """
     plans = _base_plans(static)
-    index = _tier_of(static, aberrations, field, u)
+    index = tier = _tier_of(static, aberrations, field, u)
     # A rotationally symmetric design (any design on the axis) is integrated along one ray:
     # more plans in the same switch (``_radial_plans``).
     symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
@@ -1378,7 +1376,7 @@ def _plans_and_index(static, aberrations, field, u):
             n_base = len(plans)
             index = jnp.where(symmetric, n_base + group, index)
             plans = plans + radial_plans
-    return plans, index, n_base
+    return plans, index, tier, n_base
 
 
 @functools.partial(jax.jit, static_argnums=0)
@@ -1396,11 +1394,10 @@ def _traced_merit(static, inputs):
     # |H| does not depend on tilt; removing it smooths H over the band (fewer OTF nodes).
     aberrations = aberrations.without_tilt()
     operands = (aberrations, field, u, signal, noise)
-    plans, index, n_base = _plans_and_index(static, aberrations, field, u)
+    plans, index, tier, n_base = _plans_and_index(static, aberrations, field, u)
     if len(plans) == 1 and plans[0][1] is None:
         value = _merit_value(plans[0][0], dtype, *operands)
     else:
-        tier = _tier_of(static, aberrations, field, u)
         value = _switched_merit(_Static((plans, dtype, n_base)), (index, tier), operands)
     return jnp.where(finite, value, jnp.inf)
 
@@ -1461,7 +1458,6 @@ def baseline_jmse(aberrations, field, u, signal, noise, B: int = 64):
     grid_otf = otf_fft_grid(aberrations, field, B, dtype)
     k = jnp.fft.fftfreq(2 * B, 1.0 / (2 * B)).astype(dtype)
     nu_x, nu_y = jnp.meshgrid(k / B, k / B, indexing="xy")
-    u = jnp.asarray(u, dtype)
     band = (jnp.abs(nu_x) < u) & (jnp.abs(nu_y) < u)
     s_e = error_spectral_density(grid_otf, signal(nu_x, nu_y), noise(nu_x, nu_y))
     value = jnp.sum(jnp.where(band, s_e, 0.0)) / (B * B) / (2.0 * math.pi)
