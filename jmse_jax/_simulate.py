@@ -53,6 +53,7 @@ import functools
 import math
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -245,12 +246,51 @@ def _image_system(name, image, aberrations, field, u, signal, noise, otf_nodes):
     dtype = common_dtype(image, aberrations, field, u, signal, noise)  # None has no leaves
     image = image.astype(dtype)
     u = jnp.asarray(u, dtype)
+    if not is_concrete((image, aberrations, field, u, signal, noise)):
+        caller = {"image": "restore", "scene": "simulate_capture"}[name]
+        image = _traced_checks(caller, image, u, image_name=name, image=image,
+                               aberrations=aberrations, field=field, signal=signal,
+                               noise=noise)
     nu_x, nu_y, spacing = _grid(image.shape, u, dtype)
     s_n = noise(nu_x, nu_y)
     _check_positive_psd("noise PSD", s_n)
     h = _otf_on_grid(aberrations, jnp.asarray(field, dtype), spacing, image.shape, otf_nodes,
                      dtype)
     return image, u, nu_x, nu_y, s_n, h
+
+
+def _traced_checks(caller, x, u, *, image_name=None, image=None, aberrations=None,
+                   field=None, signal=None, noise=None):
+    """``x`` behind runtime errors (``equinox.error_if``) for traced input that the concrete
+    checks would have refused: an image has no ``+inf`` convention like the merit's, and one
+    made from such input would be NaN or silently wrong. Under ``vmap`` any bad batch
+    element raises. Arguments left ``None`` are not checked."""
+
+    def finite(tree):
+        return jnp.all(jnp.stack(
+            [jnp.all(jnp.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(tree)]))
+
+    u = jnp.asarray(u)
+    checks = [((u > 0) & (u <= U_MAX),
+               f"u must be in (0, {U_MAX}] (the traced value is outside it or not finite)")]
+    if image is not None:
+        checks.append((finite(image), f"{image_name} must be finite (a traced pixel is not)"))
+    if aberrations is not None:
+        checks.append((finite(aberrations),
+                       "aberrations must be finite (a traced coefficient is not)"))
+    if field is not None:
+        field = jnp.asarray(field)
+        checks.append(((field >= 0) & (field <= 1),
+                       "field must be in [0, 1] (the traced value is outside it or not "
+                       "finite)"))
+    for label, spectrum in (("signal", signal), ("noise", noise)):
+        if spectrum is not None:
+            checks.append((jnp.asarray(spectrum.valid(), bool),
+                           f"{label} parameters must be finite and > 0 (a traced value is "
+                           f"not)"))
+    for ok, message in checks:
+        x = eqx.error_if(x, jnp.logical_not(ok), f"{caller}: {message}")
+    return x
 
 
 def _grid(shape, u, dtype):
@@ -315,6 +355,8 @@ def random_scene(signal: AbstractSignal, shape, u, key):
     u = jnp.asarray(u, dtype)
     nu_x, nu_y, _ = _grid(shape, u, dtype)
     amplitude = 2.0 * u * jnp.sqrt(signal(nu_x, nu_y))
+    if not is_concrete((signal, u)):
+        amplitude = _traced_checks("random_scene", amplitude, u, signal=signal)
     return _coloured_noise(key, shape, amplitude, dtype)
 
 
@@ -350,7 +392,8 @@ def simulate_capture(
 
     Returns
     -------
-    array ``(n_y, n_x)``: the blurred, noisy capture.
+    array ``(n_y, n_x)``: the blurred, noisy capture. Under ``jit``/``vmap``/``grad``
+    out-of-range traced input raises a runtime error naming the argument, as ``restore``.
 
     Examples
     --------
@@ -412,6 +455,9 @@ def restore(
     For a scene drawn from ``signal`` and captured by ``simulate_capture`` the expected
     per-pixel squared error of the result is ``Delta nu**2 sum_k S_e(nu_k)``, which tends to
     ``2 pi JMSE`` (see ``monte_carlo_mse``). Jit-compatible; differentiable in the floats.
+    Under ``jit``/``vmap``/``grad`` a non-finite or out-of-range traced input (pixels,
+    coefficients, ``field``, ``u``, the spectra's parameters) raises a runtime error that
+    names the argument (``equinox.error_if``) instead of returning NaN pixels.
 
     Examples
     --------

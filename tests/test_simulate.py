@@ -9,6 +9,7 @@ is ``benchmarks/monte_carlo.py``.
 from __future__ import annotations
 
 import math
+import re
 
 import jax
 import jax.numpy as jnp
@@ -291,3 +292,62 @@ def test_predicted_pixel_mse_under_jit_is_inf_for_bad_noise(size):
     expected = jj.predicted_pixel_mse(FIG1, 0.95, 0.2, MARKOV, NOISE, size=size,
                                       jmse_preset="fast")
     assert float(merit(float(NOISE.variance))) == pytest.approx(float(expected), rel=1e-12)
+
+
+def _runtime_error_message(call):
+    """The message of the runtime error ``call()`` raises (equinox's error under jax.jit
+    arrives as an XLA runtime error whose text carries it)."""
+    with pytest.raises(Exception) as info:  # noqa: PT011 - the class depends on the jit
+        jax.block_until_ready(call())
+    return str(info.value)
+
+
+def test_images_under_jit_raise_for_bad_traced_input():
+    """Traced values cannot raise a ValueError at trace time, and an image has no +inf
+    convention: restore, simulate_capture and random_scene raise a runtime error naming
+    the argument instead of returning NaN pixels (before: NaN or silently wrong images)."""
+    image = np.zeros((9, 9))
+    image[4, 4] = 1.0
+    restore = jax.jit(lambda v, u, field: jj.restore(image, FIG1, field, u, MARKOV,
+                                                     jj.WhiteNoise(v)))
+    good = restore(1e-3, 0.2, 0.95)
+    np.testing.assert_allclose(good, jj.restore(image, FIG1, 0.95, 0.2, MARKOV, NOISE),
+                               rtol=1e-12, atol=1e-15)
+    for args, message in [((-1e-3, 0.2, 0.95), "restore: noise parameters must be finite"),
+                          ((1e-3, float("nan"), 0.95), r"restore: u must be in \(0, 1.5\]"),
+                          ((1e-3, 2.0, 0.95), r"restore: u must be in \(0, 1.5\]"),
+                          ((1e-3, 0.2, 1.5), r"restore: field must be in \[0, 1\]")]:
+        assert re.search(message, _runtime_error_message(lambda args=args: restore(*args))), args
+
+    capture = jax.jit(jax.vmap(lambda field: jj.simulate_capture(
+        image, FIG1, field, 0.2, NOISE, jax.random.key(0))))
+    assert capture(jnp.array([0.1, 0.5])).shape == (2, 9, 9)
+    assert "simulate_capture: field must be in [0, 1]" in _runtime_error_message(
+        lambda: capture(jnp.array([0.1, 1.5])))
+    pixels = jax.jit(lambda x: jj.restore(x, FIG1, 0.95, 0.2, MARKOV, NOISE))
+    assert "restore: image must be finite" in _runtime_error_message(
+        lambda: pixels(jnp.asarray(image).at[1, 1].set(jnp.nan)))
+
+    scene = jax.jit(lambda mu: jj.random_scene(jj.MarkovSignal(1.0, mu), (9, 9), 0.2,
+                                               jax.random.key(0)))
+    np.testing.assert_allclose(scene(5.0), jj.random_scene(MARKOV, (9, 9), 0.2,
+                                                           jax.random.key(0)), rtol=1e-12)
+    assert "random_scene: signal parameters must be finite and > 0" in (
+        _runtime_error_message(lambda: scene(-5.0)))
+
+
+def test_gradient_of_restore_under_jit_is_finite_and_guarded():
+    """The runtime checks do not disturb derivatives: d(sum restored)/d(noise variance)
+    under jit equals a central difference, and a bad variance still raises."""
+    image = np.zeros((9, 9))
+    image[4, 4] = 1.0
+    image[2, 6] = -0.5
+
+    def total(v):
+        return jnp.sum(jj.restore(image, FIG1, 0.95, 0.2, MARKOV, jj.WhiteNoise(v)) ** 2)
+
+    grad = jax.jit(jax.grad(total))
+    step = 1e-7
+    fd = (total(1e-3 + step) - total(1e-3 - step)) / (2 * step)
+    assert float(grad(1e-3)) == pytest.approx(float(fd), rel=1e-6)
+    assert "noise parameters must be finite" in _runtime_error_message(lambda: grad(-1.0))
