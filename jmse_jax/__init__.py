@@ -14,6 +14,7 @@ from ._aberrations import (
     wavefront as wavefront,
 )
 from ._merit import (
+    CHECKED_SNR as CHECKED_SNR,
     CHECKED_STRENGTH as CHECKED_STRENGTH,
     DEFAULT_TIERS as DEFAULT_TIERS,
     OVERLAP_FLOOR as OVERLAP_FLOOR,

@@ -45,6 +45,7 @@ __all__ = [
     "OVERLAP_FLOOR",
     "PRESETS",
     "TierShortcut",
+    "CHECKED_SNR",
     "CHECKED_STRENGTH",
     "U_MAX",
     "aberration_strength",
@@ -62,6 +63,12 @@ U_MAX = 1.5
 CHECKED_STRENGTH = 25.0
 #: The same for rotationally symmetric designs, which take the one-ray plans (README).
 CHECKED_STRENGTH_ONE_RAY = 45.0
+#: The largest peak signal-to-noise ratio ``max S_x / S_n`` over the band at which the
+#: presets' accuracy was checked (a noise variance of 1e-6 under ``MarkovSignal(1, 5)``,
+#: whose ``S_x(0)`` is 157). Beyond it the peaks of ``S_e`` along the OTF's zeros, of width
+#: ``~ sqrt(S_n / S_x)``, grow narrower than the fine grids resolve (README, "Accuracy at
+#: low noise"); a concrete call with a preset's grids gets a ``UserWarning``.
+CHECKED_SNR = 2e8
 
 
 class TierShortcut(NamedTuple):
@@ -1411,6 +1418,16 @@ def _concrete_choice(static, aberrations, field, u):
             _strength(aberrations, field, u))
 
 
+def _peak_snr(u, signal, noise):
+    """``max S_x / S_n`` over a 17 x 17 grid of the band's quadrant ``[0, u]^2`` (for the
+    package's spectra: at ``nu = 0``), for concrete spectra (in the spectra's dtype)."""
+    axis = np.linspace(0.0, float(u), 17)
+    nu_x, nu_y = (jnp.asarray(a) for a in np.meshgrid(axis, axis))
+    ratio = (np.asarray(signal(nu_x, nu_y), np.float64)
+             / np.asarray(noise(nu_x, nu_y), np.float64))
+    return float(np.max(ratio))
+
+
 def _concrete_merit(static, inputs, warn=False):
     """``jmse`` after validation, for concrete inputs: the plan this design takes is chosen
     first, and only the grids it needs are compiled (each once per process) and run.
@@ -1428,6 +1445,16 @@ def _concrete_merit(static, inputs, warn=False):
             f"grids sized for it (nodes, se_nodes, overlap_nodes; see jmse's docstring and "
             f"the README) and compare two of them (are the coefficients in waves?)",
             UserWarning, stacklevel=3)
+    if warn:
+        snr = _peak_snr(*inputs[2:])
+        if snr > CHECKED_SNR:
+            warnings.warn(
+                f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
+                f"presets were checked at ({CHECKED_SNR:.0e}): the peaks of S_e along the "
+                f"OTF's zeros are narrower than their grids resolve, and the JMSE may be off "
+                f"by up to percents (6 waves of defocus: 1.6e-3 at 1.6e9, 2.6e-2 at 1.6e10). "
+                f"Give finer se_nodes and compare two of them",
+                UserWarning, stacklevel=3)
     plan = plans[index]
     if symmetric:
         radial_plans, split = _radial_plans(plans)
