@@ -1281,7 +1281,9 @@ def jmse(
     -----
     A concrete design whose ``aberration_strength`` exceeds what the presets were checked
     at (``CHECKED_STRENGTH``, 25; 45 for rotationally symmetric designs) gets a
-    ``UserWarning`` unless grid options are given. Discrete options are static (Python
+    ``UserWarning`` unless grid options are given, and so does a peak ``max S_x / S_n``
+    above ``CHECKED_SNR`` (2e8), where the peaks of ``S_e`` along the OTF's zeros outgrow
+    the grids (README, "Accuracy at low noise"). Discrete options are static (Python
     values). Bad concrete input raises ``ValueError``;
     under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u``, the spectra's
     parameters) give ``+inf`` (never NaN) with zero gradient.

@@ -12,6 +12,7 @@ import math
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._numerics import abs2, check_range, safe_norm
 
@@ -25,6 +26,28 @@ __all__ = [
     "error_spectral_density",
     "wiener_filter",
 ]
+
+
+def _check_peak(model, peak):
+    """Concrete check that the spectrum's largest value (at ``nu = 0``), computed in
+    float64, is finite: beyond that ``S_e`` would be ``inf / inf`` (NaN)."""
+    if peak is None:
+        return  # traced: ``valid`` covers it
+    peak = float(peak)
+    if not math.isfinite(peak):
+        raise ValueError(f"{model!r}: S_x(0) = {peak} overflows float64; rescale the "
+                         f"parameters (the spectrum's peak must be finite)")
+
+
+def _peak64(formula, *parameters):
+    """``formula`` of concrete parameters in float64 NumPy (overflow gives inf, quietly);
+    ``None`` when a parameter is traced."""
+    try:
+        values = [np.asarray(p, np.float64) for p in parameters]
+    except (TypeError, jax.errors.TracerArrayConversionError):
+        return None
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        return np.max(formula(*values))
 
 
 def _positive(*values):
@@ -78,9 +101,12 @@ class MarkovSignal(AbstractSignal):
     def __check_init__(self):
         check_range("variance", self.variance, 0.0, None, low_inclusive=False)
         check_range("correlation_length", self.correlation_length, 0.0, None, low_inclusive=False)
+        _check_peak(self, _peak64(lambda v, mu: 2.0 * math.pi * v * mu * mu, self.variance,
+                                  self.correlation_length))
 
     def valid(self):
-        return _positive(self.variance, self.correlation_length)
+        return _positive(self.variance, self.correlation_length) & jnp.isfinite(
+            self.radial(jnp.zeros(())))
 
     def radial(self, r):
         mu = self.correlation_length
@@ -107,9 +133,12 @@ class PowerLawSignal(AbstractSignal):
         check_range("amplitude", self.amplitude, 0.0, None, low_inclusive=False)
         check_range("exponent", self.exponent, 0.0, None, low_inclusive=False)
         check_range("knee", self.knee, 0.0, None, low_inclusive=False)
+        _check_peak(self, _peak64(lambda a, g, k: a * k ** (-g), self.amplitude, self.exponent,
+                                  self.knee))
 
     def valid(self):
-        return _positive(self.amplitude, self.exponent, self.knee)
+        return _positive(self.amplitude, self.exponent, self.knee) & jnp.isfinite(
+            self.radial(jnp.zeros(())))
 
     def radial(self, r):
         return self.amplitude * (self.knee**2 + r * r) ** (-0.5 * self.exponent)

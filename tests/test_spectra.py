@@ -99,8 +99,25 @@ def test_error_density_gradient_at_otf_zero():
         (lambda: jj.PowerLawSignal(amplitude=-1.0), r"amplitude must be in \(0\.0, inf\]"),
         (lambda: jj.PowerLawSignal(exponent=0.0), r"exponent must be in \(0\.0, inf\]"),
         (lambda: jj.WhiteSignal(0.0), r"level must be in \(0\.0, inf\], got 0\.0"),
+        # S_x(0) = 2 pi variance mu^2 and amplitude knee^-exponent past float64: S_e would
+        # be inf / inf (NaN) at the low frequencies.
+        (lambda: jj.MarkovSignal(1.0, 1e155), r"S_x\(0\) = inf overflows float64"),
+        (lambda: jj.PowerLawSignal(1.0, 400.0, 0.01), r"S_x\(0\) = inf overflows float64"),
+        (lambda: jj.PowerLawSignal(1.0, 2.0, 1e-200), r"S_x\(0\) = inf overflows float64"),
     ],
 )
 def test_bad_spectrum_parameters_raise(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_overflowing_spectrum_under_jit_is_inf_not_nan():
+    """A traced parameter whose S_x(0) overflows cannot raise: valid() is False, so the
+    merit is +inf with a zero gradient (it was NaN), and a sane value is unchanged."""
+    merit = jax.jit(lambda mu: jj.jmse(jj.Seidel(w020=1.0), 0.0, 0.2, jj.MarkovSignal(1.0, mu),
+                                       jj.WhiteNoise(1e-3), preset="fast"))
+    assert float(merit(1e155)) == float("inf")
+    assert float(jax.grad(merit)(1e155)) == 0.0
+    assert float(merit(5.0)) == pytest.approx(
+        float(jj.jmse(jj.Seidel(w020=1.0), 0.0, 0.2, jj.MarkovSignal(1.0, 5.0),
+                      jj.WhiteNoise(1e-3), preset="fast")), rel=1e-14)
