@@ -189,9 +189,18 @@ class WhiteNoise(AbstractNoise):
 
     def __check_init__(self):
         check_range("noise variance", self.variance, 0.0, None, low_inclusive=False)
+        smallest = _peak64(np.min, self.variance)
+        if smallest is not None and smallest < np.finfo(np.float64).tiny:
+            raise ValueError(
+                f"noise variance must be at least float64's smallest normal number "
+                f"({np.finfo(np.float64).tiny:.3g}; a subnormal one loses its precision in "
+                f"S_x S_n and gives NaN past the cutoff), got {float(smallest)!r}")
 
     def valid(self):
-        return _positive(self.variance)
+        variance = jnp.asarray(self.variance)
+        tiny = jnp.finfo(variance.dtype).tiny if jnp.issubdtype(variance.dtype,
+                                                                 jnp.floating) else 0.0
+        return _positive(self.variance) & jnp.all(variance >= tiny)
 
     def __call__(self, nu_x, nu_y):
         return jnp.zeros_like(nu_x * nu_y) + self.variance

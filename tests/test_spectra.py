@@ -92,6 +92,8 @@ def test_error_density_gradient_at_otf_zero():
         (lambda: jj.WhiteNoise(0.0), r"noise variance must be in \(0\.0, inf\], got 0\.0"),
         (lambda: jj.WhiteNoise(-1.0), r"noise variance must be in \(0\.0, inf\], got -1\.0"),
         (lambda: jj.WhiteNoise(float("nan")), r"noise variance must be finite"),
+        (lambda: jj.WhiteNoise(1e-310), r"noise variance must be at least float64's smallest "
+                                        r"normal number \(2\.23e-308.*got 1e-310"),
         (lambda: jj.MarkovSignal(variance=0.0), r"variance must be in \(0\.0, inf\], got 0\.0"),
         (lambda: jj.MarkovSignal(1.0, correlation_length=-1.0),
          r"correlation_length must be in \(0\.0, inf\], got -1\.0"),
@@ -117,6 +119,9 @@ def test_overflowing_spectrum_under_jit_is_inf_not_nan():
     merit = jax.jit(lambda mu: jj.jmse(jj.Seidel(w020=1.0), 0.0, 0.2, jj.MarkovSignal(1.0, mu),
                                        jj.WhiteNoise(1e-3), preset="fast"))
     assert float(merit(1e155)) == float("inf")
+    subnormal = jax.jit(lambda v: jj.jmse(jj.Seidel(w020=1.0), 0.0, 1.2, jj.MarkovSignal(),
+                                          jj.WhiteNoise(v), preset="fast"))
+    assert float(subnormal(1e-310)) == float("inf")  # was NaN (past the cutoff, u > 1)
     assert float(jax.grad(merit)(1e155)) == 0.0
     assert float(merit(5.0)) == pytest.approx(
         float(jj.jmse(jj.Seidel(w020=1.0), 0.0, 0.2, jj.MarkovSignal(1.0, 5.0),
