@@ -1430,6 +1430,20 @@ def _peak_snr(u, signal, noise):
     return float(np.max(ratio))
 
 
+def _warn_beyond_checked_snr(u, signal, noise, stacklevel):
+    """A ``UserWarning`` when the concrete spectra's peak ``S_x / S_n`` exceeds
+    ``CHECKED_SNR`` (for calls with a preset's grids)."""
+    snr = _peak_snr(u, signal, noise)
+    if snr > CHECKED_SNR:
+        warnings.warn(
+            f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
+            f"presets were checked at ({CHECKED_SNR:.0e}): the peaks of S_e along the "
+            f"OTF's zeros are narrower than their grids resolve, and the JMSE may be off "
+            f"by up to percents (6 waves of defocus: 1.6e-3 at 1.6e9, 2.6e-2 at 1.6e10). "
+            f"Give finer se_nodes and compare two of them",
+            UserWarning, stacklevel=stacklevel)
+
+
 def _concrete_merit(static, inputs, warn=False):
     """``jmse`` after validation, for concrete inputs: the plan this design takes is chosen
     first, and only the grids it needs are compiled (each once per process) and run.
@@ -1448,15 +1462,7 @@ def _concrete_merit(static, inputs, warn=False):
             f"the README) and compare two of them (are the coefficients in waves?)",
             UserWarning, stacklevel=3)
     if warn:
-        snr = _peak_snr(*inputs[2:])
-        if snr > CHECKED_SNR:
-            warnings.warn(
-                f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
-                f"presets were checked at ({CHECKED_SNR:.0e}): the peaks of S_e along the "
-                f"OTF's zeros are narrower than their grids resolve, and the JMSE may be off "
-                f"by up to percents (6 waves of defocus: 1.6e-3 at 1.6e9, 2.6e-2 at 1.6e10). "
-                f"Give finer se_nodes and compare two of them",
-                UserWarning, stacklevel=3)
+        _warn_beyond_checked_snr(*inputs[2:], stacklevel=4)
     plan = plans[index]
     if symmetric:
         radial_plans, split = _radial_plans(plans)

@@ -20,7 +20,12 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._merit import jmse, jmse_options as _full_jmse_options
+from ._merit import (
+    _GRID_OPTIONS,
+    _warn_beyond_checked_snr,
+    jmse,
+    jmse_options as _full_jmse_options,
+)
 from ._numerics import check_choice, check_count, check_range, is_concrete
 from ._spectra import AbstractNoise, AbstractSignal, MarkovSignal, WhiteNoise
 from .lens import (
@@ -156,6 +161,10 @@ def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavel
     if jmse_options is not None and not isinstance(jmse_options, dict):
         raise TypeError(f"jmse_options must be a dict of jmse keyword options, "
                         f"got {jmse_options!r}")
+    if (signal is not None and noise is not None and is_concrete((u, signal, noise))
+            and not any(key in (jmse_options or {}) for key in _GRID_OPTIONS)):
+        # lens_merit -> _check_merit_arguments -> here -> warn: the user's call is 4 up.
+        _warn_beyond_checked_snr(u, signal, noise, stacklevel=4)
     check_range("fields", fields, 0.0, 1.0)
     fields = jnp.asarray(fields, dtype)
     if fields.ndim != 1 or fields.shape[0] == 0:

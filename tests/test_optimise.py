@@ -228,3 +228,26 @@ def test_optimise_argument_errors():
         optimise(lens, ("image_shift",), merit="rms", solver="newton")
     with pytest.raises(ValueError, match=r"fields must be in \[0.0, 1.0\]"):
         lens_merit(lens, merit="rms", fields=(0.5, 1.5))
+
+
+def test_noise_beyond_the_checked_snr_warns_in_lens_merit_and_optimise():
+    """lens_merit and optimise warn as jmse does when max S_x / S_n exceeds CHECKED_SNR with
+    a preset's grids (MarkovSignal(1, 5): S_x(0) = 157, so a noise of 1e-8 is 1.6e10). The
+    warning comes with the argument checks, before anything is compiled (here a bad field
+    list then stops the call); no warning with grids of the caller's own."""
+    import warnings
+
+    lens = start_design()
+    noisy = dict(signal=jmse_jax.MarkovSignal(1.0, 5.0), noise=jmse_jax.WhiteNoise(1e-8),
+                 fields=(1.5,))
+    for fn in (lambda **kw: lens_merit(lens, **kw),
+               lambda **kw: optimise(lens, ("image_shift",), **kw)):
+        with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond"):
+            with pytest.raises(ValueError, match="fields must be in"):
+                fn(**noisy)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(ValueError, match="fields must be in"):
+                fn(**noisy, jmse_options={"se_nodes": (800, 96), "nodes": (24, 12)})
+            with pytest.raises(ValueError, match="fields must be in"):
+                fn(**{**noisy, "noise": jmse_jax.WhiteNoise(1e-6)})
