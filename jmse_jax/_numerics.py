@@ -19,6 +19,7 @@ import numpy as np
 __all__ = [
     "EXACT",
     "abs2",
+    "all_finite",
     "barycentric_matrix",
     "check_choice",
     "check_count",
@@ -264,6 +265,14 @@ def barycentric_matrix(source: np.ndarray, target: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------------
 # Argument checks (raise ValueError when values are concrete; silent under tracing)
 # --------------------------------------------------------------------------------------
+
+
+def all_finite(tree):
+    """Whether every inexact leaf of ``tree`` is finite everywhere, as a traceable bool
+    (integer leaves are always finite)."""
+    leaves = [jnp.all(jnp.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(tree)
+              if jnp.issubdtype(jnp.result_type(leaf), jnp.inexact)]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
 
 
 def is_concrete(x) -> bool:

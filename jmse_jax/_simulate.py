@@ -62,6 +62,7 @@ from ._aberrations import AbstractAberrations
 from ._merit import U_MAX, _sanitise, jmse
 from ._numerics import (
     abs2,
+    all_finite,
     check_choice,
     check_count,
     check_finite_tree,
@@ -248,9 +249,8 @@ def _image_system(name, image, aberrations, field, u, signal, noise, otf_nodes):
     u = jnp.asarray(u, dtype)
     if not is_concrete((image, aberrations, field, u, signal, noise)):
         caller = {"image": "restore", "scene": "simulate_capture"}[name]
-        image = _traced_checks(caller, image, u, image_name=name, image=image,
-                               aberrations=aberrations, field=field, signal=signal,
-                               noise=noise)
+        image = _traced_checks(caller, image, u, image_name=name, aberrations=aberrations,
+                               field=field, signal=signal, noise=noise)
     nu_x, nu_y, spacing = _grid(image.shape, u, dtype)
     s_n = noise(nu_x, nu_y)
     _check_positive_psd("noise PSD", s_n)
@@ -259,24 +259,20 @@ def _image_system(name, image, aberrations, field, u, signal, noise, otf_nodes):
     return image, u, nu_x, nu_y, s_n, h
 
 
-def _traced_checks(caller, x, u, *, image_name=None, image=None, aberrations=None,
-                   field=None, signal=None, noise=None):
+def _traced_checks(caller, x, u, *, image_name=None, aberrations=None, field=None,
+                   signal=None, noise=None):
     """``x`` behind runtime errors (``equinox.error_if``) for traced input that the concrete
     checks would have refused: an image has no ``+inf`` convention like the merit's, and one
     made from such input would be NaN or silently wrong. Under ``vmap`` any bad batch
-    element raises. Arguments left ``None`` are not checked."""
-
-    def finite(tree):
-        return jnp.all(jnp.stack(
-            [jnp.all(jnp.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(tree)]))
-
+    element raises. With ``image_name``, ``x`` is that image and its pixels are checked;
+    arguments left ``None`` are not checked."""
     u = jnp.asarray(u)
     checks = [((u > 0) & (u <= U_MAX),
                f"u must be in (0, {U_MAX}] (the traced value is outside it or not finite)")]
-    if image is not None:
-        checks.append((finite(image), f"{image_name} must be finite (a traced pixel is not)"))
+    if image_name is not None:
+        checks.append((all_finite(x), f"{image_name} must be finite (a traced pixel is not)"))
     if aberrations is not None:
-        checks.append((finite(aberrations),
+        checks.append((all_finite(aberrations),
                        "aberrations must be finite (a traced coefficient is not)"))
     if field is not None:
         field = jnp.asarray(field)

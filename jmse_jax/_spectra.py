@@ -28,26 +28,24 @@ __all__ = [
 ]
 
 
-def _check_peak(model, peak):
-    """Concrete check that the spectrum's largest value (at ``nu = 0``), computed in
-    float64, is finite: beyond that ``S_e`` would be ``inf / inf`` (NaN)."""
-    if peak is None:
-        return  # traced: ``valid`` covers it
-    peak = float(peak)
-    if not math.isfinite(peak):
-        raise ValueError(f"{model!r}: S_x(0) = {peak} overflows float64; rescale the "
-                         f"parameters (the spectrum's peak must be finite)")
-
-
-def _peak64(formula, *parameters):
+def _float64_of(formula, *parameters):
     """``formula`` of concrete parameters in float64 NumPy (overflow gives inf, quietly);
-    ``None`` when a parameter is traced."""
+    ``None`` when a parameter is traced (``valid`` covers those)."""
     try:
         values = [np.asarray(p, np.float64) for p in parameters]
     except (TypeError, jax.errors.TracerArrayConversionError):
         return None
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        return np.max(formula(*values))
+        return float(formula(*values))
+
+
+def _check_peak(model, formula, *parameters):
+    """Concrete check that the spectrum's largest value ``S_x(0) = formula(*parameters)``,
+    computed in float64, is finite: beyond that ``S_e`` would be ``inf / inf`` (NaN)."""
+    peak = _float64_of(lambda *v: np.max(formula(*v)), *parameters)
+    if peak is not None and not math.isfinite(peak):
+        raise ValueError(f"{model!r}: S_x(0) = {peak} overflows float64; rescale the "
+                         f"parameters (the spectrum's peak must be finite)")
 
 
 def _positive(*values):
@@ -101,8 +99,8 @@ class MarkovSignal(AbstractSignal):
     def __check_init__(self):
         check_range("variance", self.variance, 0.0, None, low_inclusive=False)
         check_range("correlation_length", self.correlation_length, 0.0, None, low_inclusive=False)
-        _check_peak(self, _peak64(lambda v, mu: 2.0 * math.pi * v * mu * mu, self.variance,
-                                  self.correlation_length))
+        _check_peak(self, lambda v, mu: 2.0 * math.pi * v * mu * mu, self.variance,
+                    self.correlation_length)
 
     def valid(self):
         return _positive(self.variance, self.correlation_length) & jnp.isfinite(
@@ -133,8 +131,8 @@ class PowerLawSignal(AbstractSignal):
         check_range("amplitude", self.amplitude, 0.0, None, low_inclusive=False)
         check_range("exponent", self.exponent, 0.0, None, low_inclusive=False)
         check_range("knee", self.knee, 0.0, None, low_inclusive=False)
-        _check_peak(self, _peak64(lambda a, g, k: a * k ** (-g), self.amplitude, self.exponent,
-                                  self.knee))
+        _check_peak(self, lambda a, g, k: a * k ** (-g), self.amplitude, self.exponent,
+                    self.knee)
 
     def valid(self):
         return _positive(self.amplitude, self.exponent, self.knee) & jnp.isfinite(
@@ -189,12 +187,12 @@ class WhiteNoise(AbstractNoise):
 
     def __check_init__(self):
         check_range("noise variance", self.variance, 0.0, None, low_inclusive=False)
-        smallest = _peak64(np.min, self.variance)
+        smallest = _float64_of(np.min, self.variance)
         if smallest is not None and smallest < np.finfo(np.float64).tiny:
             raise ValueError(
                 f"noise variance must be at least float64's smallest normal number "
                 f"({np.finfo(np.float64).tiny:.3g}; a subnormal one loses its precision in "
-                f"S_x S_n and gives NaN past the cutoff), got {float(smallest)!r}")
+                f"S_x S_n and gives NaN past the cutoff), got {smallest!r}")
 
     def valid(self):
         variance = jnp.asarray(self.variance)

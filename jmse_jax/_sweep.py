@@ -32,7 +32,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._aberrations import Seidel
 from ._merit import U_MAX, jmse, jmse_options
-from ._numerics import check_count
+from ._numerics import all_finite, check_count
 
 __all__ = ["SweepResult", "SweepStatus", "hypercube", "sweep", "sweep_jmse"]
 
@@ -338,12 +338,6 @@ def _resolve_devices(devices) -> list:
     return devices
 
 
-def _all_finite(tree):
-    leaves = [jnp.all(jnp.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(tree)
-              if jnp.issubdtype(jnp.result_type(leaf), jnp.inexact)]
-    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
-
-
 def _make_evaluate(fn, grad, has_aux, valid):
     """Per-design function: (value, grad, aux, status) for one unbatched design."""
 
@@ -355,11 +349,11 @@ def _make_evaluate(fn, grad, has_aux, valid):
         else:
             value, aux = fn(design) if has_aux else (fn(design), None)
             gradient = None
-        status = jnp.where(_all_finite(gradient), SweepStatus.OK, SweepStatus.NONFINITE_GRADIENT)
-        status = jnp.where(_all_finite(value), status, SweepStatus.NONFINITE_VALUE)
+        status = jnp.where(all_finite(gradient), SweepStatus.OK, SweepStatus.NONFINITE_GRADIENT)
+        status = jnp.where(all_finite(value), status, SweepStatus.NONFINITE_VALUE)
         if valid is not None:
             status = jnp.where(jnp.asarray(valid(design), bool), status, SweepStatus.INVALID)
-        status = jnp.where(_all_finite(design), status, SweepStatus.NONFINITE_INPUT)
+        status = jnp.where(all_finite(design), status, SweepStatus.NONFINITE_INPUT)
         return value, gradient, aux, status.astype(jnp.int8)
 
     return evaluate
