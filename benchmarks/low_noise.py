@@ -10,16 +10,18 @@ References. On the axis, where ``S_e`` depends on ``r = |nu|`` alone, the JMSE i
 integral ``(1 / 2 pi) int S_e(r) L(r) dr`` with ``L(r)`` the length of the circle of radius
 ``r`` inside the band's square; it is computed with ``scipy.integrate.quad`` (relative
 tolerance 1e-11, breakpoints at the OTF's zeros found on a 400 001-point ray) and the OTF
-from ``jmse_jax.otf`` with a (96, 96) overlap rule. Off the axis (the Fig. 1 point) the
-reference is the ``high`` preset, checked against a polar grid with four times its fine
-radial nodes (they agree to ~1e-13 at every noise here).
+from ``jmse_jax.otf`` with a (96, 96) overlap rule. Off the axis the reference is the polar
+grid ``REFERENCE`` (22 400 fine radial nodes), checked against ``CHECK`` (half as many).
 
-Compared: ``jmse`` with the ``fast``, ``default`` and ``high`` presets, and the explicit
-polar grid ``nodes=(80, 40), se_nodes=(8000, 960), overlap_nodes=(48, 48)`` (what the
-warning's "finer se_nodes" means). Findings feed ``CHECKED_SNR`` (README, "Accuracy at low
-noise").
+Compared: ``jmse`` with the ``fast``, ``default`` and ``high`` presets, the explicit polar
+grid ``FINE`` (what the warning's "finer se_nodes" means), and on the axis the default
+without the one-ray plan's closed-form peaks (``jmse_jax._radial._zero_peaks``; the
+package before they were added). Findings feed ``CHECKED_SNR`` (README, "Accuracy at low
+noise"). The near-axis designs (6 waves of defocus with 0.5 wave of coma or astigmatism at
+field 0.1, and a weaker mix at field 0.3) are the polar grid's hard case: their OTF nearly
+vanishes on rings.
 
-Usage (from the repository root; about 5 min on 2 cores)::
+Usage (from the repository root; about 12 min on 2 cores)::
 
     .venv/bin/python benchmarks/low_noise.py
 
@@ -44,8 +46,9 @@ import numpy as np  # noqa: E402
 from scipy import integrate  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
+from jmse_jax import _radial as radial  # noqa: E402
 
-NOISES = (1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
+NOISES = (1e-4, 3e-5, 1e-5, 1e-6, 1e-7, 1e-8)
 FIG1 = dict(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198)
 #: (name, Seidel coefficients, field, u)
 CASES = (
@@ -53,10 +56,27 @@ CASES = (
     ("defocus 6, axis", dict(w020=6.0), 0.0, 0.2),
     ("defocus -2 + spherical 1.2, axis, u 0.5", dict(w020=-2.0, w040=1.2), 0.0, 0.5),
     ("Fig. 1 (field 0.95)", FIG1, 0.95, 0.2),
+    ("defocus 6 + coma 0.5, field 0.1", dict(w020=6.0, w131=0.5), 0.1, 0.2),
+    ("defocus 6 + astigmatism 0.5, field 0.1", dict(w020=6.0, w222=0.5), 0.1, 0.2),
+    ("defocus 3 + coma 0.3 + astigmatism 0.3, field 0.3",
+     dict(w020=3.0, w131=0.3, w222=0.3), 0.3, 0.2),
 )
 FINE = dict(quadrature="polar", nodes=(80, 40), se_nodes=(8000, 960), overlap_nodes=(48, 48))
+REFERENCE = dict(quadrature="polar", nodes=(80, 40), se_nodes=(22400, 960),
+                 overlap_nodes=(48, 48))
 CHECK = dict(quadrature="polar", nodes=(80, 40), se_nodes=(11200, 960),
              overlap_nodes=(48, 48))
+
+
+def uncorrected(args):
+    """The default preset with the one-ray plan's closed-form peaks turned off."""
+    radial._SUBTRACT = False
+    jax.clear_caches()
+    try:
+        return float(jj.jmse(*args))
+    finally:
+        radial._SUBTRACT = True
+        jax.clear_caches()
 
 
 def radial_reference(coefficients, u, signal, noise_variance, nodes=(96, 96)):
@@ -90,10 +110,14 @@ def main() -> None:
                   checked_snr=jj.CHECKED_SNR, signal="MarkovSignal(1, 5)", rows=[])
     lines = ["# Accuracy at low noise", "",
              f"Relative error against a converged reference; signal `MarkovSignal(1, 5)` "
-             f"(S_x(0) = {peak:.1f}), white noise; commit {report['machine'].get('commit')}. "
-             f"`CHECKED_SNR` = {jj.CHECKED_SNR:.0e}: a concrete call above it warns.", "",
+             f"(S_x(0) = {peak:.1f}), white noise, u = 0.2 unless named; commit "
+             f"{report['machine'].get('commit')}. `CHECKED_SNR` = {jj.CHECKED_SNR:.0e}: a "
+             f"concrete call that takes a polar grid warns above it. The last column is the "
+             f"default's one-ray plan without its closed-form peaks (the package before "
+             f"them).", "",
              "| case | noise | peak S_x/S_n | reference | fast | default | high | "
-             "se_nodes (8000, 960) |", "|---|---|---|---|---|---|---|---|"]
+             "se_nodes (8000, 960) | default, no closed-form peaks |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for name, coefficients, field, u in CASES:
         ab = jj.Seidel(**coefficients)
         for noise_variance in NOISES:
@@ -104,21 +128,24 @@ def main() -> None:
                           for key in ("fast", "default", "high")}
                 values["fine"] = float(jj.jmse(*args, **FINE))
                 if field == 0.0:
+                    values["uncorrected"] = uncorrected(args)
                     reference, quad_error, _ = radial_reference(coefficients, u, signal,
                                                                 noise_variance)
                     how = f"1-D quad (error estimate {quad_error / reference:.0e})"
                 else:
-                    reference = values["high"]
+                    reference = float(jj.jmse(*args, **REFERENCE))
                     check = float(jj.jmse(*args, **CHECK))
-                    how = f"high (vs 4x fine radial: {common.relative_error(check, reference):.0e})"
+                    how = (f"polar, 22400 fine radial (vs 11200: "
+                           f"{common.relative_error(check, reference):.0e})")
             errors = {k: common.relative_error(v, reference) for k, v in values.items()}
             snr = peak / noise_variance
             report["rows"].append(dict(case=name, coefficients=coefficients, field=field, u=u,
                                        noise=noise_variance, peak_snr=snr, reference=reference,
                                        reference_kind=how, values=values, errors=errors))
+            before = f"{errors['uncorrected']:.1e}" if "uncorrected" in errors else "-"
             lines.append(f"| {name} | {noise_variance:.0e} | {snr:.1e} | {reference:.6e}, "
                          f"{how} | {errors['fast']:.1e} | {errors['default']:.1e} | "
-                         f"{errors['high']:.1e} | {errors['fine']:.1e} |")
+                         f"{errors['high']:.1e} | {errors['fine']:.1e} | {before} |")
             print(lines[-1], flush=True)
     common.write_report("low_noise", report, lines)
 

@@ -65,11 +65,14 @@ CHECKED_STRENGTH = 25.0
 #: The same for rotationally symmetric designs, which take the one-ray plans (README).
 CHECKED_STRENGTH_ONE_RAY = 45.0
 #: The largest peak signal-to-noise ratio ``max S_x / S_n`` over the band at which the
-#: presets' accuracy was checked (a noise variance of 1e-6 under ``MarkovSignal(1, 5)``,
-#: whose ``S_x(0)`` is 157). Beyond it the peaks of ``S_e`` along the OTF's zeros, of width
-#: ``~ sqrt(S_n / S_x)``, grow narrower than the fine grids resolve (README, "Accuracy at
-#: low noise"); a concrete call with a preset's grids gets a ``UserWarning``.
-CHECKED_SNR = 2e8
+#: presets' polar grids were checked to 1e-4 (a noise variance of about 8e-5 under
+#: ``MarkovSignal(1, 5)``, whose ``S_x(0)`` is 157; the bank's lowest noise, 1e-4, is
+#: 1.6e6). Beyond it the peaks of ``S_e`` where the OTF nearly vanishes on a ring (designs
+#: near rotational symmetry), of width ``~ sqrt(S_n / S_x)``, grow narrower than the fine
+#: grids resolve (README, "Accuracy at low noise"); a concrete call that takes a polar grid
+#: of a preset gets a ``UserWarning``. Rotationally symmetric designs are exempt: their
+#: one-ray plans integrate those peaks in closed form (checked to a peak ratio of 1.6e16).
+CHECKED_SNR = 2e6
 
 
 class TierShortcut(NamedTuple):
@@ -1282,9 +1285,10 @@ def jmse(
     A concrete design whose ``aberration_strength`` exceeds what the presets were checked
     at (``CHECKED_STRENGTH``, 25; 45 for rotationally symmetric designs) gets a
     ``UserWarning`` unless grid options are given, and so does a peak ``max S_x / S_n``
-    above ``CHECKED_SNR`` (2e8), where the peaks of ``S_e`` along the OTF's zeros outgrow
-    the grids (README, "Accuracy at low noise"). Discrete options are static (Python
-    values). Bad concrete input raises ``ValueError``;
+    above ``CHECKED_SNR`` (2e6) for a design that takes a polar grid: where the OTF nearly
+    vanishes on a ring the peaks of ``S_e`` outgrow the grids (README, "Accuracy at low
+    noise"; a rotationally symmetric design's one-ray plan integrates them exactly).
+    Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
     under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u``, the spectra's
     parameters) give ``+inf`` (never NaN) with zero gradient.
     Works in float32 and float64; the result follows the inputs' dtype.
@@ -1437,10 +1441,11 @@ def _warn_beyond_checked_snr(u, signal, noise, stacklevel):
     if snr > CHECKED_SNR:
         warnings.warn(
             f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
-            f"presets were checked at ({CHECKED_SNR:.0e}): the peaks of S_e along the "
-            f"OTF's zeros are narrower than their grids resolve, and the JMSE may be off "
-            f"by up to percents (6 waves of defocus: 1.6e-3 at 1.6e9, 2.6e-2 at 1.6e10). "
-            f"Give finer se_nodes and compare two of them",
+            f"presets' polar grids were checked at ({CHECKED_SNR:.0e}): where the OTF "
+            f"nearly vanishes on a ring (designs near the axis) the peaks of S_e are "
+            f"narrower than the grids resolve, and the JMSE may be off by 1e-4 to percents "
+            f"(measured near the axis: 1e-4 at 5e6, 1e-3 at 1.6e8, 6e-2 at 1.6e10; "
+            f"benchmarks/low_noise.py). Give finer se_nodes and compare two of them",
             UserWarning, stacklevel=stacklevel)
 
 
@@ -1461,7 +1466,7 @@ def _concrete_merit(static, inputs, warn=False):
             f"grids sized for it (nodes, se_nodes, overlap_nodes; see jmse's docstring and "
             f"the README) and compare two of them (are the coefficients in waves?)",
             UserWarning, stacklevel=3)
-    if warn:
+    if warn and not symmetric:  # the one-ray plans integrate the peaks in closed form
         _warn_beyond_checked_snr(*inputs[2:], stacklevel=4)
     plan = plans[index]
     if symmetric:

@@ -250,4 +250,4 @@ def test_noise_beyond_the_checked_snr_warns_in_lens_merit_and_optimise():
             with pytest.raises(ValueError, match="fields must be in"):
                 fn(**noisy, jmse_options={"se_nodes": (800, 96), "nodes": (24, 12)})
             with pytest.raises(ValueError, match="fields must be in"):
-                fn(**{**noisy, "noise": jmse_jax.WhiteNoise(1e-6)})
+                fn(**{**noisy, "noise": jmse_jax.WhiteNoise(1e-4)})  # 1.6e6
