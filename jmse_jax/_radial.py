@@ -70,16 +70,16 @@ _MIN_FINE = (12800, 3200)
 #: value of ``spherical_6_balanced`` from 6e-7 to 1.6e-4 (24: 6e-7).
 _MIN_ALONG = 24
 
+#: Private switch for studies (benchmarks/low_noise.py, test_radial): False drops the
+#: closed-form peaks of ``_zero_peaks``.
 _SUBTRACT = True
 
 
 class _SubPanels(NamedTuple):
-    """Host description of a fine rule's sub-panels: ``ids`` (N,), the sub-panel of each
-    fine node; ``starts`` (P + 1,), the index of each sub-panel's first node (then N);
-    ``edges`` (P + 1,), the sub-panels' ends in the rule's variable."""
+    """Host description of a fine rule's sub-panels: ``sizes`` (P,), their node counts, and
+    ``edges`` (P + 1,), their ends in the rule's variable."""
 
-    ids: np.ndarray
-    starts: np.ndarray
+    sizes: np.ndarray
     edges: np.ndarray
 
 
@@ -131,10 +131,8 @@ def _fine_rule(edges, coarse_counts, fine_counts):
         blocks.append(barycentric_matrix(x_c, x_f))
         sub_edges.extend(cuts[1:])
         sub_sizes.extend(len(x) for x, _ in rules)
-    sub_panels = _SubPanels(np.repeat(np.arange(len(sub_sizes)), sub_sizes),
-                            np.concatenate([[0], np.cumsum(sub_sizes)]), np.asarray(sub_edges))
     return (np.concatenate(coarse), np.concatenate(fine), np.concatenate(weights),
-            tuple(blocks), sub_panels)
+            tuple(blocks), _SubPanels(np.asarray(sub_sizes), np.asarray(sub_edges)))
 
 
 def _interpolate(blocks, h, dtype):
@@ -207,8 +205,8 @@ def _zero_peaks(h, r, bare, s_x, s_n, rule, edges, theta, signal, noise):
     ``h, r, bare, s_x, s_n`` are the fine nodes of both pieces of the ray in ascending ``r``,
     with bare weights (``sum bare f(r) ~ int f(r) r dr``); ``rule`` is their ``_RayRule``,
     ``edges`` the sub-panels' ends in ``r`` (``(lower, upper)``) and ``theta(r)`` the
-    angular factor of the integrand with its derivative. One call serves both pieces (each
-    call adds to every program's compile time).
+    angular factor of the integrand. One call serves both pieces (each call adds to every
+    program's compile time).
 
     Near a zero ``r0`` of ``h``, with ``h = g d + q d^2`` (``d = r - r0``), and the spectra
     and ``theta`` linear in ``d`` about their values at ``r0``,
@@ -268,7 +266,7 @@ def _zero_peaks(h, r, bare, s_x, s_n, rule, edges, theta, signal, noise):
     ones = jnp.ones_like(r0)
     s_x0, ds_x = jax.jvp(signal.radial, (r0,), (ones,))
     s_n0, ds_n = jax.jvp(lambda r: noise(r, jnp.zeros_like(r)), (r0,), (ones,))
-    theta0, dtheta = theta(r0)
+    theta0, dtheta = jax.jvp(theta, (r0,), (ones,))
     c = jnp.sqrt(s_n0 / s_x0) / jnp.abs(g)
     k = (c * (ds_n / s_n0 + dtheta / theta0),  # slope of the numerator
          c * d2p / g,  # 2 q / g with q = p'' / 2
@@ -308,12 +306,12 @@ class _RayRule(NamedTuple):
 @functools.cache
 def _joined_rule(n_a: int, n_b: int, m_a: int, m_b: int) -> _RayRule:
     (*_, sub_a), (*_, sub_b) = _ray_rules(n_a, n_b, m_a, m_b)
-    p_a, p_b = len(sub_a.starts) - 1, len(sub_b.starts) - 1
-    n_nodes_a = int(sub_a.starts[-1])
-    intervals = np.ones(n_nodes_a + int(sub_b.starts[-1]) - 1, bool)
-    intervals[n_nodes_a - 1] = False
-    return _RayRule(np.concatenate([sub_a.ids, sub_b.ids + p_a]),
-                    np.concatenate([sub_a.starts[:-1], sub_b.starts + n_nodes_a]),
+    sizes = np.concatenate([sub_a.sizes, sub_b.sizes])
+    p_a, p_b = len(sub_a.sizes), len(sub_b.sizes)
+    intervals = np.ones(int(sizes.sum()) - 1, bool)
+    intervals[int(sub_a.sizes.sum()) - 1] = False
+    return _RayRule(np.repeat(np.arange(p_a + p_b), sizes),
+                    np.concatenate([[0], np.cumsum(sizes)]),
                     np.repeat([0, p_a], [p_a, p_b]),
                     np.repeat([p_a - 1, p_a + p_b - 1], [p_a, p_b]), intervals)
 
@@ -355,17 +353,16 @@ def radial_band_integral(aberrations, field, u, signal, noise, options, dtype):
     h_b = _interpolate(interp_b, h[n_a:], dtype)
     t_f, w_t, v_f, w_v = (jnp.asarray(x, dtype) for x in (t_f, w_t, v_f, w_v))
 
-    def theta(r):  # the angular factor and its derivative, for both pieces
-        beyond = r > u
-        root = jnp.sqrt(jnp.where(beyond, r * r - u * u, 1.0))
-        return (jnp.where(beyond, _theta(u, r), two_pi),
-                jnp.where(beyond, -8.0 * u / (r * root), 0.0))
+    def theta(r):  # the angular factor of either piece
+        return jnp.where(r > u, _theta(u, r), two_pi)
 
     r_a = a * t_f
     r_b = u + length_b * v_f * v_f
     bare_a = a * w_t * r_a
     bare_b = (2.0 * length_b) * w_v * v_f * r_b
     spectra = [(signal.radial(r), noise(r, jnp.zeros_like(r))) for r in (r_a, r_b)]
+    # The weights keep their former order of products (A's is 2 pi bare_a), so that the sum
+    # is bit for bit what it was: on the axis d/dfield is exactly 0 (test_radial).
     total = sum(jnp.sum(w * (s_x * s_n / (h * h * s_x + s_n)))
                 for w, h, (s_x, s_n) in zip(((two_pi * a) * w_t * r_a, bare_b * _theta(u, r_b)),
                                             (h_a, h_b), spectra, strict=True))
