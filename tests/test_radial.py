@@ -16,7 +16,7 @@ import numpy as np
 import oracles
 import problems
 import pytest
-from compiled import assert_vmap_matches_singles, jmse_fn
+from compiled import jmse_fn
 
 import jmse_jax as jj
 from jmse_jax import _merit, _radial
@@ -274,23 +274,6 @@ def test_gradients_on_the_axis(coefficients, u, variance):
     for zero in (d_field, grad.w131, grad.w222, grad.w311, grad.w111):
         assert abs(float(zero)) <= 1e-12 * scale
     assert np.isfinite(float(value))
-
-
-def test_vmap_mixes_symmetric_and_other_designs():
-    """Under vmap (value_and_grad) each design gets what it gets alone, in a batch with
-    designs on the axis (one-ray plans of both groups) and off it (polar grids)."""
-    designs = [
-        (jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198), 0.95),
-        (jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198), 0.0),
-        (jj.Seidel(w020=8.0, w040=-4.0), 0.0),  # strength 22.6 at u = 0.5: the second group
-        (jj.Seidel(w020=0.2), 0.0),
-    ]
-    u = 0.5
-
-    def merit(a, f):
-        return jj.jmse(a, f, u, SIGNAL, NOISE)
-
-    assert_vmap_matches_singles(merit, designs)
 
 
 _FAST_SEIDEL = ("w020", "w040", "w131", "w222", "w220")

@@ -135,7 +135,7 @@ def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
         lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **grid)))(ab)
     eager = jj.jmse(ab, field, u, SIGNAL, NOISE)
     jitted = jmse_fn()(ab, field, u, SIGNAL, NOISE)
-    value, gradient = _default_value_and_grad(ab, field, u)
+    value, gradient = _default_value_and_grad(ab, field, u, SIGNAL, NOISE)
     np.testing.assert_allclose([eager, jitted, value], float(expected), rtol=1e-13)
     for name in ("w020", "w040", "w131", "w222", "w220"):
         np.testing.assert_allclose(getattr(gradient, name), getattr(expected_grad, name),
@@ -248,8 +248,7 @@ def test_shortcut_check_outside_float32_range_falls_back_to_the_tier_grid(scale)
     ab, field, u, _ = DESIGNS[1]
     signal = jj.MarkovSignal(scale * SIGNAL.variance, SIGNAL.correlation_length)
     noise = jj.WhiteNoise(scale * NOISE.variance)
-    value, gradient = jax.jit(jax.value_and_grad(
-        lambda a: jj.jmse(a, field, u, signal, noise)))(ab)
+    value, gradient = _default_value_and_grad(ab, field, u, signal, noise)
     expected, expected_grad = jax.jit(jax.value_and_grad(
         lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **jj.DEFAULT_TIERS[1][2])))(ab)
     assert float(value) == pytest.approx(scale * float(expected), rel=1e-12)
@@ -271,8 +270,10 @@ def test_shortcut_keeps_the_middle_tier_accurate(ab, field, u, name):
 
 
 @jax.jit
-def _default_value_and_grad(ab, field, u):
-    return jax.value_and_grad(lambda a: jj.jmse(a, field, u, SIGNAL, NOISE))(ab)
+def _default_value_and_grad(ab, field, u, signal, noise):
+    """The default's value and gradient in the coefficients, every input traced (one
+    compilation serves every test here that passes these input types)."""
+    return jax.value_and_grad(lambda a: jj.jmse(a, field, u, signal, noise))(ab)
 
 
 @jax.jit
@@ -289,7 +290,7 @@ def _coefficients(ab):
 
 def test_default_gradient_matches_finite_differences_in_the_top_tier():
     ab, field, u, _ = DESIGNS[3]
-    grad = _default_value_and_grad(ab, field, u)[1].w040
+    grad = _default_value_and_grad(ab, field, u, SIGNAL, NOISE)[1].w040
     h = 1e-4
     f = [float(jmse_fn()(jj.Seidel(**{**_coefficients(ab), "w040": 5.0 + s * h}), field, u,
                          SIGNAL, NOISE)) for s in (1, -1)]
@@ -337,6 +338,15 @@ SMALL_TIERS = (
 )
 
 
+def _tiers_without_one_ray(monkeypatch, tiers):
+    """The default with ``tiers`` and no one-ray plans. For the off-axis designs of the
+    shortcut and derivative-rule tests: a traced design might be symmetric, so the default's
+    programs also hold the one-ray plans and their symmetry-breaking derivative rule
+    (tests/test_radial.py), which are a third of their compile time."""
+    monkeypatch.setitem(jj.PRESETS["default"], "tiers", tiers)
+    monkeypatch.setitem(jj.PRESETS["default"], "radial", False)
+
+
 def test_float32_design_with_float64_spectra_differentiates(monkeypatch):
     """A float32 design with the signal and noise given as Python floats (float64 with x64
     on): the tier switch's derivative rule returns a float32 tangent (it raised a dtype
@@ -344,7 +354,7 @@ def test_float32_design_with_float64_spectra_differentiates(monkeypatch):
     float32 accuracy."""
     from jmse_jax._otf import along_chord_order
 
-    monkeypatch.setitem(jj.PRESETS["default"], "tiers", SMALL_TIERS)
+    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
     ab, field, u, _ = DESIGNS[1]
     vag = jax.jit(jax.value_and_grad(lambda a, f: jj.jmse(a, f, u, SIGNAL, NOISE)))
     value32, grad32 = vag(_to_float32(ab), jnp.float32(field))
@@ -370,7 +380,9 @@ def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch):
     """Under vmap (value_and_grad) every design gets its own tier's grid, in a batch
     that mixes tiers, holds one design that keeps the shortcut's trial and one that refuses
     it, and leaves one tier unused (the batching rule skips tiers and grids no design needs).
-    The oracle is the unbatched evaluation, which the tests above check grid by grid."""
+    Three designs on the axis take the one-ray plans of both groups of tiers
+    (``_radial_plans``: tiers 0-1 and 2-3). The oracle is the unbatched evaluation, which
+    the tests above (and tests/test_radial.py for the one-ray plans) check grid by grid."""
     trial = dict(nodes=(8, 4), se_nodes=(40, 16), overlap_nodes=(8, 8))
     check = dict(nodes=(6, 4), se_nodes=(30, 12), overlap_nodes=(6, 6))
     middle = [DESIGNS[1], DEFOCUS_M6]  # both in the middle tier below
@@ -390,12 +402,19 @@ def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch):
     assert [int(_tier_index(float(jj.aberration_strength(ab, f, u)), u, tiers))
             for ab, f, u, _ in designs] == [0, 1, 1, 3]
 
+    # On the axis: strengths 0.11 and 1.7 (tiers 0 and 1, the first one-ray plan) and 13.6
+    # (tier 3, the second).
+    on_axis = [(jj.Seidel(w020=0.2), 0.0), (jj.Seidel(w020=8.0, w040=-4.0), 0.0),
+               (jj.Seidel(w020=24.0), 0.0)]
+    assert [int(_tier_index(float(jj.aberration_strength(ab, f, 0.2)), 0.2, tiers))
+            for ab, f in on_axis] == [0, 1, 3]
+
     def merit(a, f):
         return jj.jmse(a, f, 0.2, SIGNAL, NOISE)
 
     # The value-only rule is checked with the real tiers above
     # (test_vmap_over_designs_in_different_tiers).
-    assert_vmap_matches_singles(merit, [(ab, f) for ab, f, _, _ in designs])
+    assert_vmap_matches_singles(merit, [(ab, f) for ab, f, _, _ in designs] + on_axis)
 
 
 @pytest.mark.parametrize("first_tol, kept", [(None, "trial"), (math.inf, "first"),
@@ -420,7 +439,7 @@ def test_shortcut_is_tried_only_up_to_u_max(monkeypatch, first_tol, kept):
     ab, field, _, _ = DESIGNS[1]
     assert abs(_fixed(ab, field, 0.2, first) / _fixed(ab, field, 0.2, shortcut.trial) - 1) > 1e-4
     assert jj.DEFAULT_TIERS[1][3].u_max == pytest.approx(1 / math.sqrt(2))
-    monkeypatch.setitem(jj.PRESETS["default"], "tiers", tiers)
+    _tiers_without_one_ray(monkeypatch, tiers)
     ab, field, _, _ = DESIGNS[1]
     us = (0.2, 0.3, 0.4)
     expected = [_fixed(ab, field, u, trial if u <= 0.3 else _SMALL) for u in us]
@@ -442,7 +461,7 @@ def test_second_derivatives_of_the_default(monkeypatch):
     """The Hessian of the default (forward over reverse through the tier switch and its
     batching rule) equals central differences of its gradient, in a tier with a shortcut
     (it raised an error when the batching rule was first added)."""
-    monkeypatch.setitem(jj.PRESETS["default"], "tiers", SMALL_TIERS)
+    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
     ab, field, u, _ = DESIGNS[1]
     base = _coefficients(ab)
 
@@ -467,7 +486,7 @@ def test_calls_outside_jit_compile_once(monkeypatch):
     jitted ones."""
     from jmse_jax import _merit
 
-    monkeypatch.setitem(jj.PRESETS["default"], "tiers", SMALL_TIERS)
+    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
     ab, field, u, _ = DESIGNS[1]
     other = jj.Seidel(**{**_coefficients(ab), "w020": -2.5})
 
@@ -500,7 +519,7 @@ def test_derivative_rule_differentiates_only_the_operands_with_tangents(monkeypa
     and 3x its compile time). Each directional derivative equals a central difference."""
     from jmse_jax import _merit
 
-    monkeypatch.setitem(jj.PRESETS["default"], "tiers", SMALL_TIERS)
+    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
     jax.clear_caches()  # the rule runs when a transformation is traced, not from a cache
     masks = []
     original = _merit._value_and_grad
