@@ -136,9 +136,9 @@ def gradient(options, coefficients, field, u, signal, noise):
 
 
 def gradient_rows(signal, peak):
-    """The gradient study (module docstring): ``(rows, markdown lines)``."""
-    lines = ["", "## Gradients against the converged grid's", "",
-             "Largest difference of the gradient in (w020, w040, w131, w222, w220, field) over "
+    """The gradient study (module docstring): ``(rows, markdown lines)``, the lines
+    without a heading."""
+    lines = ["Largest difference of the gradient in (w020, w040, w131, w222, w220, field) over "
              "the largest component of the reference gradient (`REFERENCE`'s, by `jax.grad`; "
              "its own difference from `CHECK`'s in the reference column).", "",
              "| case | noise | peak S_x/S_n | reference (vs CHECK) | fast | default | high | "
@@ -184,10 +184,10 @@ def main() -> None:
                   checked_snr=jj.CHECKED_SNR, signal="MarkovSignal(1, 5)", rows=[])
     if arguments.gradients_only:
         report["gradient_rows"], lines = gradient_rows(signal, peak)
-        lines[1:2] = ["# Gradients at low noise", "",
-                      f"Signal `MarkovSignal(1, 5)`, white noise, u = 0.2; commit "
-                      f"{report['machine'].get('commit')}."]
-        common.write_report("low_noise_gradients", report, lines[1:])
+        header = ["# Gradients at low noise", "",
+                  f"Signal `MarkovSignal(1, 5)`, white noise, u = 0.2; commit "
+                  f"{report['machine'].get('commit')}.", ""]
+        common.write_report("low_noise_gradients", report, header + lines)
         return
     lines = ["# Accuracy at low noise", "",
              f"Relative error against a converged reference; signal `MarkovSignal(1, 5)` "
@@ -230,7 +230,7 @@ def main() -> None:
             print(lines[-1], flush=True)
     if not arguments.values_only:
         report["gradient_rows"], more = gradient_rows(signal, peak)
-        lines += more
+        lines += ["", "## Gradients against the converged grid's", "", *more]
     common.write_report("low_noise", report, lines)
 
 

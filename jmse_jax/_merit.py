@@ -1445,7 +1445,8 @@ def _warn_beyond_checked_snr(u, signal, noise, stacklevel):
             f"nearly vanishes on a ring (designs near the axis) the peaks of S_e are "
             f"narrower than the grids resolve, and the JMSE may be off by 1e-4 to percents "
             f"(measured near the axis: 1e-4 at 5e6, 1e-3 at 1.6e8, 6e-2 at 1.6e10; "
-            f"benchmarks/low_noise.py). Give finer se_nodes and compare two of them",
+            f"benchmarks/low_noise.py), its gradient by more (3-8 % at 1.6e7). Give finer "
+            f"se_nodes and compare two of them",
             UserWarning, stacklevel=stacklevel)
 
 

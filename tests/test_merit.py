@@ -259,8 +259,8 @@ def test_float32_value_and_gradient_follow_float64(preset):
             route = _route(jj.Seidel(**coefficients), field, 0.2, signal, noise)
             assert not route["one_ray"]
             _, _, grid, shortcut = jj.DEFAULT_TIERS[route["tier"]]
-            options = {"grid": grid, "first": getattr(shortcut, "first", None),
-                       "trial": getattr(shortcut, "trial", None)}[route["path"]]
+            # The path names the grid: the tier's own, or the shortcut's field of that name.
+            options = grid if route["path"] == "grid" else getattr(shortcut, route["path"])
         out = {}
         for dtype, vag in ((jnp.float32, vag32), (jnp.float64, value_and_grad(options))):
             ab = jj.Seidel(**{k: dtype(v) for k, v in coefficients.items()})
