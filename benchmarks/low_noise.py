@@ -55,7 +55,7 @@ import numpy as np  # noqa: E402
 from scipy import integrate  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
-from jmse_jax import _radial as radial  # noqa: E402
+import jmse_jax._radial as radial  # noqa: E402
 
 NOISES = (1e-4, 3e-5, 1e-5, 1e-6, 1e-7, 1e-8)
 GRADIENT_NOISES = (1e-4, 1e-5, 1e-6)
@@ -71,19 +71,26 @@ CASES = (
     ("defocus 3 + coma 0.3 + astigmatism 0.3, field 0.3",
      dict(w020=3.0, w131=0.3, w222=0.3), 0.3, 0.2),
 )
-FINE = dict(quadrature="polar", nodes=(80, 40), se_nodes=(8000, 960), overlap_nodes=(48, 48))
+FINE = dict(quadrature="polar", nodes=(80, 40), se_nodes=(8000, 960), overlap_nodes=(48, 48),
+            peaks=True)
 REFERENCE = dict(quadrature="polar", nodes=(80, 40), se_nodes=(22400, 960),
-                 overlap_nodes=(48, 48))
+                 overlap_nodes=(48, 48), peaks=True)
 CHECK = dict(quadrature="polar", nodes=(80, 40), se_nodes=(11200, 960),
-             overlap_nodes=(48, 48))
+             overlap_nodes=(48, 48), peaks=True)
+#: The compared settings of ``jmse`` (column name, keywords).
+COMPARED = (("fast", dict(preset="fast")), ("default", dict(preset="default")),
+            ("default, peaks", dict(preset="default", peaks=True)),
+            ("high", dict(preset="high")), ("high, no peaks", dict(preset="high", peaks=False)),
+            ("se_nodes (8000, 960)", FINE))
 
 
-def uncorrected(args):
-    """The default preset with the one-ray plan's closed-form peaks turned off."""
+def uncorrected(fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` with the closed-form peaks of the one-ray plan
+    (``_radial._zero_peaks``) turned off (the polar grids' are the option ``peaks``)."""
     radial._SUBTRACT = False
     jax.clear_caches()
     try:
-        return float(jj.jmse(*args))
+        return fn(*args, **kwargs)
     finally:
         radial._SUBTRACT = True
         jax.clear_caches()
@@ -140,9 +147,11 @@ def gradient_rows(signal, peak):
     without a heading."""
     lines = ["Largest difference of the gradient in (w020, w040, w131, w222, w220, field) over "
              "the largest component of the reference gradient (`REFERENCE`'s, by `jax.grad`; "
-             "its own difference from `CHECK`'s in the reference column).", "",
-             "| case | noise | peak S_x/S_n | reference (vs CHECK) | fast | default | high | "
-             "se_nodes (8000, 960) |", "|---|---|---|---|---|---|---|---|"]
+             "its own difference from `CHECK`'s in the reference column, and from its own "
+             "grid's without the closed-form peaks of `jmse_jax._ridges`, `peaks=False`).", "",
+             "| case | noise | peak S_x/S_n | reference (vs CHECK; vs no peaks) | "
+             + " | ".join(name for name, _ in COMPARED) + " |",
+             "|---|---|---|---|" + "---|" * len(COMPARED)]
     rows = []
     for name, coefficients, field, u in CASES:
         if field == 0.0:
@@ -152,10 +161,11 @@ def gradient_rows(signal, peak):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # the SNR warning, which this study measures
                 reference = gradient(REFERENCE, coefficients, field, u, signal, noise)
-                grads = {key: gradient(dict(preset=key), coefficients, field, u, signal, noise)
-                         for key in ("fast", "default", "high")}
-                grads["fine"] = gradient(FINE, coefficients, field, u, signal, noise)
+                grads = {key: gradient(options, coefficients, field, u, signal, noise)
+                         for key, options in COMPARED}
                 grads["check"] = gradient(CHECK, coefficients, field, u, signal, noise)
+                grads["plain reference"] = gradient({**REFERENCE, "peaks": False},
+                                                    coefficients, field, u, signal, noise)
             scale = float(np.max(np.abs(reference)))
             errors = {k: float(np.max(np.abs(g - reference))) / scale for k, g in grads.items()}
             rows.append(dict(case=name, coefficients=coefficients, field=field, u=u,
@@ -164,9 +174,8 @@ def gradient_rows(signal, peak):
                              gradients={k: g.tolist() for k, g in grads.items()},
                              errors=errors))
             lines.append(f"| {name} | {noise_variance:.0e} | {peak / noise_variance:.1e} | "
-                         f"{errors['check']:.0e} | {errors['fast']:.1e} | "
-                         f"{errors['default']:.1e} | {errors['high']:.1e} | "
-                         f"{errors['fine']:.1e} |")
+                         f"{errors['check']:.0e}; {errors['plain reference']:.0e} | "
+                         + " | ".join(f"{errors[key]:.1e}" for key, _ in COMPARED) + " |")
             print(lines[-1], flush=True)
     return rows, lines
 
@@ -193,40 +202,43 @@ def main() -> None:
              f"Relative error against a converged reference; signal `MarkovSignal(1, 5)` "
              f"(S_x(0) = {peak:.1f}), white noise, u = 0.2 unless named; commit "
              f"{report['machine'].get('commit')}. `CHECKED_SNR` = {jj.CHECKED_SNR:.0e}: a "
-             f"concrete call that takes a polar grid warns above it. The last column is the "
-             f"default's one-ray plan without its closed-form peaks (the package before "
-             f"them).", "",
-             "| case | noise | peak S_x/S_n | reference | fast | default | high | "
-             "se_nodes (8000, 960) | default, no closed-form peaks |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             f"concrete call that takes a polar grid warns above it. `peaks`: the closed-form "
+             f"peaks of the polar grids (`jmse_jax._ridges`). The last column is the default "
+             f"without the closed-form peaks of its one-ray plan (on the axis): the package "
+             f"before them. Off the axis the reference is the polar grid `REFERENCE` with "
+             f"`peaks=True`, compared with `CHECK` and with `REFERENCE` without them.", "",
+             "| case | noise | peak S_x/S_n | reference | "
+             + " | ".join(name for name, _ in COMPARED) + " | default, no one-ray peaks |",
+             "|---|---|---|---|" + "---|" * (len(COMPARED) + 1)]
     for name, coefficients, field, u in CASES:
         ab = jj.Seidel(**coefficients)
         for noise_variance in NOISES:
             args = (ab, field, u, signal, jj.WhiteNoise(noise_variance))
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # the SNR warning, which this study measures
-                values = {key: float(jj.jmse(*args, preset=key))
-                          for key in ("fast", "default", "high")}
-                values["fine"] = float(jj.jmse(*args, **FINE))
+                values = {key: float(jj.jmse(*args, **options)) for key, options in COMPARED}
                 if field == 0.0:
-                    values["uncorrected"] = uncorrected(args)
+                    values["uncorrected"] = uncorrected(lambda a=args: float(jj.jmse(*a)))
+                if field == 0.0:
                     reference, quad_error, _ = radial_reference(coefficients, u, signal,
                                                                 noise_variance)
                     how = f"1-D quad (error estimate {quad_error / reference:.0e})"
                 else:
                     reference = float(jj.jmse(*args, **REFERENCE))
                     check = float(jj.jmse(*args, **CHECK))
+                    plain = float(jj.jmse(*args, **{**REFERENCE, "peaks": False}))
                     how = (f"polar, 22400 fine radial (vs 11200: "
-                           f"{common.relative_error(check, reference):.0e})")
+                           f"{common.relative_error(check, reference):.0e}; vs no peaks: "
+                           f"{common.relative_error(plain, reference):.0e})")
             errors = {k: common.relative_error(v, reference) for k, v in values.items()}
             snr = peak / noise_variance
             report["rows"].append(dict(case=name, coefficients=coefficients, field=field, u=u,
                                        noise=noise_variance, peak_snr=snr, reference=reference,
                                        reference_kind=how, values=values, errors=errors))
-            before = f"{errors['uncorrected']:.1e}" if "uncorrected" in errors else "-"
+            before = f"{errors['uncorrected']:.1e}" if "uncorrected" in errors else "–"
             lines.append(f"| {name} | {noise_variance:.0e} | {snr:.1e} | {reference:.6e}, "
-                         f"{how} | {errors['fast']:.1e} | {errors['default']:.1e} | "
-                         f"{errors['high']:.1e} | {errors['fine']:.1e} | {before} |")
+                         f"{how} | " + " | ".join(f"{errors[key]:.1e}" for key, _ in COMPARED)
+                         + f" | {before} |")
             print(lines[-1], flush=True)
     if not arguments.values_only:
         report["gradient_rows"], more = gradient_rows(signal, peak)

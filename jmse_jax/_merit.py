@@ -29,16 +29,19 @@ from ._numerics import (
 )
 from ._otf import OTF_METHODS, _otf_fft, _otf_nudft, _otf_overlap, otf_fft_grid
 from ._quadrature import (
+    FINE_SUB_PANEL,
     OUTER_NODES,
     QUADRATURES,
     angular_rule,
     angular_split,
+    fine_sub_panels,
     frequency_quadrature,
     polar_interpolation_matrices,
     polar_panels,
     radial_panel_sizes,
 )
 from ._radial import radial_band_integral
+from ._ridges import ridge_peaks
 from ._spectra import AbstractNoise, AbstractSignal, error_spectral_density
 
 __all__ = [
@@ -47,6 +50,7 @@ __all__ = [
     "PRESETS",
     "TierShortcut",
     "CHECKED_SNR",
+    "CHECKED_SNR_PEAKS",
     "CHECKED_STRENGTH",
     "U_MAX",
     "aberration_strength",
@@ -73,6 +77,11 @@ CHECKED_STRENGTH_ONE_RAY = 45.0
 #: of a preset gets a ``UserWarning``. Rotationally symmetric designs are exempt: their
 #: one-ray plans integrate those peaks in closed form (checked to a peak ratio of 1.6e16).
 CHECKED_SNR = 2e6
+#: ``CHECKED_SNR`` for calls with ``peaks=True`` (the ``"high"`` preset), whose polar grids
+#: integrate those peaks in closed form (``jmse_jax._ridges``): checked near the axis to
+#: a peak ratio of 1.6e8 (``benchmarks/low_noise.py``: values within 7e-6 (default) and
+#: 3e-9 (``"high"``) up to 1.6e9, gradients within 1.5e-4 and 7e-7 at 1.6e8).
+CHECKED_SNR_PEAKS = 2e8
 
 
 class TierShortcut(NamedTuple):
@@ -192,7 +201,10 @@ _PRESET_ONLY = ("tiers", "radial")
 #: option is overridden. ``radial``: a rotationally symmetric design (any design on the axis)
 #: with isotropic spectra is integrated along one ray (``jmse_jax._radial``), with counts
 #: along the ray derived from the grid (``radial_counts``); overriding a grid option turns it
-#: off too.
+#: off too. ``peaks``: the polar grids' fine stage integrates the narrow peaks of ``S_e``
+#: at the minima of ``|H|^2`` along its rays in closed form (``jmse_jax._ridges``); on in
+#: ``"high"`` only, as it costs every program that holds a grid about 1.5 s of compile
+#: (3 s with a gradient) and a batch under ``vmap`` runs it for every design.
 PRESETS: dict[str, dict] = {
     # 16 overlap nodes along the chords (20 until 2026-11-25): the same worst error on the
     # bank (3.1e-2) and on 40 random designs of the paper's singlet space against ``high``
@@ -200,12 +212,12 @@ PRESETS: dict[str, dict] = {
     "fast": dict(
         quadrature="polar", nodes=(24, 16), se_nodes=(400, 120), otf_method="overlap",
         overlap_nodes=(28, 16), tiers=None, radial=True,
-        overlap_floor=OVERLAP_FLOOR,
+        overlap_floor=OVERLAP_FLOOR, peaks=False,
     ),
     "default": dict(
         quadrature="polar", nodes=(40, 20), se_nodes=(2400, 160), otf_method="overlap",
         overlap_nodes=(28, 24), tiers=DEFAULT_TIERS, radial=True,
-        overlap_floor=OVERLAP_FLOOR,
+        overlap_floor=OVERLAP_FLOOR, peaks=False,
     ),
     # 80 radial OTF nodes for H's (1 - r)^(3/2) edge on bands that reach the cutoff, 2800
     # radial S_e nodes for the ridges along the OTF's zeros at high SNR; each count differs
@@ -214,7 +226,7 @@ PRESETS: dict[str, dict] = {
     "high": dict(
         quadrature="polar", nodes=(80, 40), se_nodes=(2800, 960), otf_method="overlap",
         overlap_nodes=(48, 48), tiers=None, radial=True,
-        overlap_floor=OVERLAP_FLOOR,
+        overlap_floor=OVERLAP_FLOOR, peaks=True,
     ),
 }
 
@@ -238,6 +250,9 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
     check_count("B", options["B"])
     options["overlap_nodes"] = _pair("overlap_nodes", options["overlap_nodes"])
     check_count("overlap_floor", options["overlap_floor"])
+    if not isinstance(options["peaks"], (bool, np.bool_)):
+        raise ValueError(f"peaks must be True or False, got {options['peaks']!r}")
+    options["peaks"] = bool(options["peaks"])
     options["overlap_floor"] = int(options["overlap_floor"])
     if options["quadrature"] == "polar":
         options["nodes"] = _pair("nodes", options["nodes"])
@@ -369,6 +384,10 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
     return jnp.concatenate(parts, axis=-1)
 
 
+#: Private switch for studies: False drops the closed-form peaks of ``jmse_jax._ridges``
+#: (the option ``peaks``) from every polar grid.
+_RIDGES = True
+
 #: Fine S_e nodes per block of angular rows (see ``_fine_blocks``).
 _FINE_BLOCK_POINTS = 1 << 16
 
@@ -395,10 +414,11 @@ def _signal_at(signal, panels, outer):
     return signal(panels.nu_x, panels.nu_y)
 
 
-def _fine_parts(h, l_a, l_a_t, u, signal, noise, n_r, n_a, angles, dtype, adjoint):
+def _fine_parts(h, l_a, l_a_t, u, signal, noise, n_r, n_a, angles, dtype, adjoint, ridges):
     """``sum w S_e`` over a block of angular rows of the fine grid (``angles``: their angle
     fractions and weights; ``l_a``: their rows of the angular interpolation matrix) and their
-    outer nodes; with ``adjoint``, also ``L_a^T g`` where
+    outer nodes, with the closed-form peaks of ``jmse_jax._ridges`` if ``ridges`` (on the
+    fine rule with sub-panels, ``FINE_SUB_PANEL``); with ``adjoint``, also ``L_a^T g`` where
     ``g = w dS_e/dRe(H) + i w dS_e/dIm(H)``.
 
     ``h`` holds the radially interpolated OTF as real numbers, ``(n_coarse, 2, 2, n_r)``:
@@ -408,7 +428,8 @@ def _fine_parts(h, l_a, l_a_t, u, signal, noise, n_r, n_a, angles, dtype, adjoin
     These products contract over at most a few dozen rows, so their summation order is
     fixed.
     """
-    fine = polar_panels(u, n_r, n_a, dtype, n_outer=OUTER_NODES, angles=angles)
+    fine = polar_panels(u, n_r, n_a, dtype, n_outer=OUTER_NODES, angles=angles,
+                        sub_panel=FINE_SUB_PANEL if ridges else None)
     size = l_a.shape[0]
     h = jnp.matmul(l_a, h.reshape(h.shape[0], -1), precision=EXACT).reshape(size, 2, 2, n_r)
     h_re, h_im = h[:, 0], h[:, 1]  # (rows, triangles, n_r)
@@ -427,7 +448,14 @@ def _fine_parts(h, l_a, l_a_t, u, signal, noise, n_r, n_a, angles, dtype, adjoin
     rows = jnp.matmul(s_e, fine.radial_weights, precision=EXACT)  # (rows, triangles)
     value = (jnp.sum(fine.row_weights[:, None] * rows)
              + jnp.sum(fine.outer_weights * s_x_out))
+    peaks = None
+    if ridges:
+        t, starts, edges = fine_sub_panels(n_r)
+        peaks = functools.partial(ridge_peaks, h, denominator, s_x, s_n, t,
+                                  fine.radial_weights, fine.row_weights, starts, edges)
     if not adjoint:
+        if peaks is not None:
+            value = value + peaks()
         return value
     # dS_e/dRe(H) + i dS_e/dIm(H) = -2 S_x^2 S_n H / D^2 = -2 (S_e S_x / D) H.
     weights = fine.row_weights[:, None, None] * fine.radial_weights
@@ -436,20 +464,27 @@ def _fine_parts(h, l_a, l_a_t, u, signal, noise, n_r, n_a, angles, dtype, adjoin
     # One product per part, each taking its own same-shape product ``c * H``: one product
     # of ``c`` broadcast over both parts cost a separate loop as long as a product
     # (benchmarks/README.md, optimisation log).
-    back = [jnp.matmul(l_a_t, (coefficient * part).reshape(size, -1), precision=EXACT)
-            for part in (h_re, h_im)]
+    parts = [coefficient * h_re, coefficient * h_im]
+    if peaks is not None:  # the peaks' derivatives join the rule's at their nodes
+        correction, *parts = peaks(parts)
+        value = value + correction
+    back = [jnp.matmul(l_a_t, part.reshape(size, -1), precision=EXACT) for part in parts]
     return value, jnp.stack(back, axis=1).reshape(l_a_t.shape[0], 2, 2, n_r)
 
 
-def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(0, 0)):
-    """``\\iint S_e`` on the ``fine`` polar grid, ``H`` interpolated from the ``coarse`` one.
+def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(0, 0),
+                ridges=False):
+    """``\\iint S_e`` on the ``fine`` polar grid, ``H`` interpolated from the ``coarse`` one;
+    with ``ridges``, on the fine rule with sub-panels and with the closed-form peaks of
+    ``jmse_jax._ridges``.
 
     Blocks of angular rows (``_fine_blocks``) run one after another. With ``adjoint``, also
     returns ``G = L_r^T (sum_blocks L_a^T g)``: the coarse-sized gradient of the total with
     respect to ``Re(H_coarse)`` + i ``Im(H_coarse)``. ``drop`` lowers the interpolants'
     degree (``polar_interpolation_matrices``; for ``_interpolation_estimate``).
     """
-    l_r, l_a_rows = polar_interpolation_matrices(coarse, fine, drop)
+    l_r, l_a_rows = polar_interpolation_matrices(coarse, fine, drop,
+                                                 FINE_SUB_PANEL if ridges else None)
     n_r, n_a = fine
     # The angular rules may be split at arccos(u) (``angular_split``): the coarse rule's
     # template row picks the fine rule's row and the block-diagonal interpolation matrix.
@@ -486,7 +521,7 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(
         total, back = carry
         rows_l, rows_l_t, frac, w_frac = rows
         part = _fine_parts(h, rows_l, rows_l_t, u, signal, noise, n_r, n_a, (frac, w_frac),
-                           dtype, adjoint)
+                           dtype, adjoint, ridges)
         if adjoint:
             part, block_back = part
             back = back + block_back
@@ -506,8 +541,8 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(
                                   jnp.matmul(back[1], l_r, precision=EXACT))
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5, 6))
-def _fine_stage(h_coarse, u, signal, noise, coarse, fine, dtype):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5, 6, 7))
+def _fine_stage(h_coarse, u, signal, noise, coarse, fine, dtype, ridges):
     """``_fine_total``'s value, with a derivative rule that needs no fine-grid residuals.
 
     The total depends on ``h_coarse`` through linear interpolation and an element-wise
@@ -519,7 +554,7 @@ def _fine_stage(h_coarse, u, signal, noise, coarse, fine, dtype):
     and the spectra go through an ordinary forward-mode derivative, only when they are not
     symbolic zeros.
     """
-    return _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, False)
+    return _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, False, ridges=ridges)
 
 
 def _is_zero(tangent) -> bool:
@@ -533,10 +568,11 @@ def _instantiate(tangent):
         tangent, is_leaf=lambda x: isinstance(x, SymbolicZero))
 
 
-def _fine_stage_jvp(coarse, fine, dtype, primals, tangents):
+def _fine_stage_jvp(coarse, fine, dtype, ridges, primals, tangents):
     h_coarse, u, signal, noise = primals
     d_h, d_u, d_signal, d_noise = tangents
-    value, adjoint = _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, True)
+    value, adjoint = _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, True,
+                                 ridges=ridges)
     tangent = jnp.zeros_like(value)
     if not _is_zero(d_h):
         tangent = tangent + jnp.sum(jnp.real(jnp.conj(adjoint) * d_h))
@@ -544,7 +580,8 @@ def _fine_stage_jvp(coarse, fine, dtype, primals, tangents):
     d_others = (d_u, d_signal, d_noise)
     if not _is_zero(d_others):
         def total(u, signal, noise):
-            return _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, False)
+            return _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, False,
+                               ridges=ridges)
         tangent = tangent + jax.jvp(total, others, _instantiate(d_others))[1]
     return value, tangent
 
@@ -565,9 +602,12 @@ def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror,
                                          noise(coarse.nu_x, coarse.nu_y))
             s_x_out = signal(coarse.outer_nu_x, coarse.outer_nu_y)  # H = 0 past the cutoff
             return jnp.sum(coarse.weights * s_e) + jnp.sum(coarse.outer_weights * s_x_out)
-        total = _fine_stage(h, u, signal, noise, options["nodes"], options["se_nodes"], dtype)
+        ridges = bool(options.get("peaks", False)) and _RIDGES
+        total = _fine_stage(h, u, signal, noise, options["nodes"], options["se_nodes"], dtype,
+                            ridges)
         if estimate:
-            return total, _interpolation_estimate(h, u, signal, noise, total, options, dtype)
+            return total, _interpolation_estimate(h, u, signal, noise, total, options, dtype,
+                                                  ridges)
         return total
     nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
     h = _otf_at(aberrations, sign * nu_x, nu_y, field, options)
@@ -575,15 +615,15 @@ def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror,
     return jnp.sum(w * s_e)
 
 
-def _interpolation_estimate(h, u, signal, noise, total, options, dtype):
+def _interpolation_estimate(h, u, signal, noise, total, options, dtype, ridges):
     """Estimate of the fine S_e stage's interpolation error, relative to its ``total``: the
     largest change of the total when the OTF's interpolants from the coarse nodes ``h`` lose
     their top Legendre coefficient, radially or angularly (``_ESTIMATE_DROP``; no
-    gradient)."""
+    gradient), each with the closed-form peaks (``ridges``) if the total has them."""
     nodes, se_nodes = options["nodes"], options["se_nodes"]
     h, u, signal, noise, total = jax.lax.stop_gradient((h, u, signal, noise, total))
-    change = [jnp.abs(_fine_total(h, u, signal, noise, nodes, se_nodes, dtype, False, drop)
-                      - total) for drop in _ESTIMATE_DROP]
+    change = [jnp.abs(_fine_total(h, u, signal, noise, nodes, se_nodes, dtype, False, drop,
+                                  ridges) - total) for drop in _ESTIMATE_DROP]
     return functools.reduce(jnp.maximum, change) / jnp.abs(total)
 
 
@@ -780,10 +820,16 @@ def _tier_plans(options, tiers):
         if shortcut is not None:
             if shortcut.trial is None and shortcut.first is None:
                 raise ValueError("a TierShortcut needs a trial or a first grid")
+            # The first and check grids keep their calibrated form, without the closed-form
+            # peaks of jmse_jax._ridges (option ``peaks``): each grid's peaks add about 3 s
+            # to the compile of every program that holds it, and where the peaks matter the
+            # two coarse grids miss them differently and disagree, which sends the design
+            # to its tier's own grid (with the peaks).
             short = (None if shortcut.trial is None else {**options, **shortcut.trial},
-                     {**options, **shortcut.check}, float(shortcut.rtol),
+                     {**options, **shortcut.check, "peaks": False}, float(shortcut.rtol),
                      float(shortcut.u_max),
-                     None if shortcut.first is None else {**options, **shortcut.first},
+                     None if shortcut.first is None
+                     else {**options, **shortcut.first, "peaks": False},
                      float(shortcut.first_tol))
         full = {**options, **grid}
         if i == len(tiers) - 1:
@@ -1210,6 +1256,7 @@ def jmse(
     overlap_nodes=None,
     overlap_floor: int | None = None,
     B: int | None = None,
+    peaks: bool | None = None,
 ):
     """Predicted mean-squared error after Wiener restoration (JMSE), Berkner & Shroff Eq. (7).
 
@@ -1274,6 +1321,14 @@ def jmse(
         shortcut's grids use 12.
     B : int
         Pupil grid of the ``"nudft"``/``"fft"`` engines.
+    peaks : bool
+        ``"polar"`` with ``se_nodes`` only: where ``|H|^2`` has a minimum along a ray of the
+        fine grid whose peak of ``S_e`` is too narrow for the fine nodes (designs near the
+        axis at high SNR), integrate that peak in closed form (``jmse_jax._ridges``). On in
+        the ``"high"`` preset; off in ``"fast"`` and ``"default"``, where it would add about
+        40 % to the compile time and, under ``vmap``, run for every design of a batch. Not
+        a grid option: ``peaks=True`` keeps the default's tiers (their own grids take it,
+        the shortcuts' first and check grids do not).
 
     Returns
     -------
@@ -1314,7 +1369,7 @@ def jmse(
         (aberrations, field, u, signal, noise),
         jmse_options(preset, quadrature=quadrature, nodes=nodes, se_nodes=se_nodes,
                      otf_method=otf_method, overlap_nodes=overlap_nodes,
-                     overlap_floor=overlap_floor, B=B))
+                     overlap_floor=overlap_floor, B=B, peaks=peaks))
     if is_concrete(inputs):
         # A preset's grids on a design stronger than they were checked at: a warning (the
         # grid options, when given, are the user's own sizing).
@@ -1434,10 +1489,21 @@ def _peak_snr(u, signal, noise):
     return jnp.max(signal(nu_x, nu_y) / noise(nu_x, nu_y))
 
 
-def _warn_beyond_checked_snr(u, signal, noise, stacklevel):
+def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False):
     """A ``UserWarning`` when the concrete spectra's peak ``S_x / S_n`` exceeds
-    ``CHECKED_SNR`` (for calls with a preset's grids)."""
+    ``CHECKED_SNR`` (for calls with a preset's grids), or ``CHECKED_SNR_PEAKS`` with the
+    closed-form peaks (``peaks``)."""
     snr = float(_peak_snr(u, signal, noise))
+    if peaks:
+        if snr > CHECKED_SNR_PEAKS:
+            warnings.warn(
+                f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
+                f"polar grids with closed-form peaks were checked at "
+                f"({CHECKED_SNR_PEAKS:.0e}; benchmarks/low_noise.py): near the axis the "
+                f"JMSE and its gradient may be off by more than 1e-4. Give finer se_nodes "
+                f"and compare two of them",
+                UserWarning, stacklevel=stacklevel)
+        return
     if snr > CHECKED_SNR:
         warnings.warn(
             f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
@@ -1445,8 +1511,9 @@ def _warn_beyond_checked_snr(u, signal, noise, stacklevel):
             f"nearly vanishes on a ring (designs near the axis) the peaks of S_e are "
             f"narrower than the grids resolve, and the JMSE may be off by 1e-4 to percents "
             f"(measured near the axis: 1e-4 at 5e6, 1e-3 at 1.6e8, 6e-2 at 1.6e10; "
-            f"benchmarks/low_noise.py), its gradient by more (3-8 % at 1.6e7). Give finer "
-            f"se_nodes and compare two of them",
+            f"benchmarks/low_noise.py), its gradient by more (3-8 % at 1.6e7). Pass "
+            f"peaks=True (closed-form peaks, on in preset='high'; checked to "
+            f"{CHECKED_SNR_PEAKS:.0e}), or give finer se_nodes and compare two of them",
             UserWarning, stacklevel=stacklevel)
 
 
@@ -1468,7 +1535,7 @@ def _concrete_merit(static, inputs, warn=False):
             f"the README) and compare two of them (are the coefficients in waves?)",
             UserWarning, stacklevel=3)
     if warn and not symmetric:  # the one-ray plans integrate the peaks in closed form
-        _warn_beyond_checked_snr(*inputs[2:], stacklevel=4)
+        _warn_beyond_checked_snr(*inputs[2:], stacklevel=4, peaks=static.value[0]["peaks"])
     plan = plans[index]
     if symmetric:
         radial_plans, split = _radial_plans(plans)

@@ -93,8 +93,39 @@ def _radial_counts(n: int) -> tuple[int, ...]:
     return tuple(counts)
 
 
-def _radial_rule(n: int):
-    """Composite Gauss rule in ``t`` on [0, 1] over ``_RADIAL_EDGES`` (host, float64).
+#: Largest Gauss order of one sub-panel of the fine ``S_e`` rule along each ray of a grid
+#: with the closed-form peaks of ``jmse_jax._ridges`` (``fine_sub_panels``): each radial
+#: panel of the fine rule is split into equal sub-panels. They keep the fine nodes evenly
+#: spread (one Gauss rule of hundreds of nodes crowds them at the panel's ends, where ``S_e``
+#: has nothing special), and give the peaks exact windows: a few sub-panels around each.
+#: The shortcuts' first and check grids, calibrated with one Gauss rule per panel, keep it.
+FINE_SUB_PANEL = 16
+
+
+def _sub_panel_sizes(k: int, sub_panel: int | None) -> list[int]:
+    """Node counts of the equal sub-panels of a panel of ``k`` nodes (at most ``sub_panel``
+    each, differing by at most one)."""
+    pieces = 1 if sub_panel is None else -(-k // sub_panel)
+    return [k // pieces + (i < k % pieces) for i in range(pieces)]
+
+
+def _panel_rule(k: int, a: float, b: float, sub_panel: int | None):
+    """``(nodes, weights, sizes, edges)``: a composite Gauss rule of ``k`` nodes on
+    ``[a, b]`` whose sub-panels (``sizes`` nodes each, between ``edges``) have lengths in
+    proportion to their counts (``sub_panel=None``: one Gauss rule)."""
+    sizes = _sub_panel_sizes(k, sub_panel)
+    edges = a + (b - a) * np.concatenate([[0], np.cumsum(sizes)]) / k
+    rules = [gauss_legendre(c, lo, hi) for c, lo, hi in zip(sizes, edges[:-1], edges[1:],
+                                                           strict=True)]
+    return (np.concatenate([x for x, _ in rules]), np.concatenate([w for _, w in rules]),
+            np.asarray(sizes), edges)
+
+
+def _radial_rule(n: int, sub_panel: int | None = None):
+    """Composite Gauss rule in ``t`` on [0, 1] over ``_RADIAL_EDGES`` (host, float64); with
+    ``sub_panel``, each panel's rule is split into sub-panels of at most that many nodes
+    (the fine ``S_e`` rule; the coarse OTF rule must stay one Gauss rule per panel, on
+    which it is interpolated).
 
     A strongly aberrated OTF falls from 1 to nearly 0 within a few hundredths of the cutoff
     around ``nu = 0`` and then ripples slowly; a separate inner panel keeps that steep part
@@ -102,20 +133,36 @@ def _radial_rule(n: int):
     """
     nodes, weights = [], []
     for (a, b), k in zip(_radial_panels(), _radial_counts(n), strict=True):
-        x, w = gauss_legendre(k, a, b)
+        x, w, _, _ = _panel_rule(k, a, b, sub_panel)
         nodes.append(x)
         weights.append(w)
     return np.concatenate(nodes), np.concatenate(weights)
 
 
-def _radial_interpolation(n_coarse: int, n_fine: int) -> np.ndarray:
-    """Block-diagonal interpolation matrix between composite radial rules (per panel)."""
+@functools.cache
+def fine_sub_panels(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(t, starts, edges)`` of the fine radial rule of ``n`` nodes: its nodes in ``t`` and
+    its sub-panels; sub-panel ``p`` holds nodes ``starts[p]`` to ``starts[p + 1] - 1`` and
+    covers ``[edges[p], edges[p + 1]]`` (``P + 1`` entries each)."""
+    sizes, edges = [], [0.0]
+    for (a, b), k in zip(_radial_panels(), _radial_counts(n), strict=True):
+        _, _, s, e = _panel_rule(k, a, b, FINE_SUB_PANEL)
+        sizes.extend(s)
+        edges.extend(e[1:])
+    return (_radial_rule(n, FINE_SUB_PANEL)[0], np.concatenate([[0], np.cumsum(sizes)]),
+            np.asarray(edges))
+
+
+def _radial_interpolation(n_coarse: int, n_fine: int,
+                          sub_panel: int | None = None) -> np.ndarray:
+    """Block-diagonal interpolation matrix from the composite coarse radial rule to the fine
+    one (with its sub-panels of at most ``sub_panel`` nodes, if given), panel by panel."""
     coarse, fine = _radial_counts(n_coarse), _radial_counts(n_fine)
     matrix = np.zeros((n_fine, n_coarse))
     r0 = c0 = 0
     for (a, b), kc, kf in zip(_radial_panels(), coarse, fine, strict=True):
         xc, _ = gauss_legendre(kc, a, b)
-        xf, _ = gauss_legendre(kf, a, b)
+        xf, *_ = _panel_rule(kf, a, b, sub_panel)
         matrix[r0:r0 + kf, c0:c0 + kc] = barycentric_matrix(xc, xf)
         r0, c0 = r0 + kf, c0 + kc
     return matrix
@@ -230,7 +277,7 @@ class PolarPanels(NamedTuple):
 
 
 def polar_panels(u, n_radial: int, n_angular: int, dtype=None, n_outer: int | None = None,
-                 angles=None) -> PolarPanels:
+                 angles=None, sub_panel: int | None = None) -> PolarPanels:
     """Polar Gauss panel rule over the folded band for Nyquist ratio ``u`` (traced).
 
     Triangle 1 holds angles ``alpha in [0, pi/4]`` from the ``nu_x`` axis, where a ray ends at
@@ -243,11 +290,13 @@ def polar_panels(u, n_radial: int, n_angular: int, dtype=None, n_outer: int | No
     ``arccos u`` for ``1/sqrt(2) < u < 1`` (where the rays start to reach the cutoff, a kink
     in the angular integrand that one Gauss rule resolves only algebraically: 1e-5 to 1e-4
     at the presets' counts, ``benchmarks/wide_band_check.py``).
+    ``sub_panel`` splits the radial rule's panels into sub-panels (``_radial_rule``; the fine
+    ``S_e`` rule's ``FINE_SUB_PANEL``).
     ``angles = (frac, w_frac)`` replaces them by the given angle fractions (of the triangle's
     ``pi/4``) and weights, e.g. one block of rows inside a loop.
     """
     dtype = dtype or jnp.result_type(float)
-    t, w_t = (jnp.asarray(a, dtype) for a in _radial_rule(n_radial))
+    t, w_t = (jnp.asarray(a, dtype) for a in _radial_rule(n_radial, sub_panel))
     if n_outer is None:
         t_out, w_t_out = t, w_t
     else:
@@ -276,12 +325,15 @@ def polar_panels(u, n_radial: int, n_angular: int, dtype=None, n_outer: int | No
 
 
 def polar_interpolation_matrices(coarse: tuple[int, int], fine: tuple[int, int],
-                                 drop: tuple[int, int] = (0, 0)):
+                                 drop: tuple[int, int] = (0, 0),
+                                 sub_panel: int | None = None):
     """Host matrices ``(L_radial, L_angular)`` taking polar-panel values from ``coarse``
     ``(n_radial, n_angular)`` Gauss nodes to ``fine`` ones (polynomial interpolation in ``t``
     and in the angle fraction, each on [0, 1]). ``L_angular`` is ``(rows, fine, coarse)``, one
     matrix per template row of the (split) angular rule (``split_interpolation``; row 0: the
     plain Gauss rules).
+
+    ``sub_panel``: the fine radial rule's sub-panels (``_radial_rule``).
 
     ``drop = (d_r, d_a)`` lowers the interpolants' degree: on every panel (and part of a
     split angular rule) the coarse values' top ``d`` Legendre coefficients are set to zero
@@ -289,7 +341,7 @@ def polar_interpolation_matrices(coarse: tuple[int, int], fine: tuple[int, int],
     on the full interpolants estimates the full one's interpolation error (the error
     estimate of ``TierShortcut.first``).
     """
-    l_r = _radial_interpolation(coarse[0], fine[0])
+    l_r = _radial_interpolation(coarse[0], fine[0], sub_panel)
     l_a = split_interpolation(coarse[1], fine[1])
     if drop[0]:
         l_r = l_r @ _radial_lowering(coarse[0], drop[0])

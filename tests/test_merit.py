@@ -448,6 +448,16 @@ def test_noise_beyond_the_checked_snr_warns():
                 se_nodes=(16, 8), overlap_nodes=(8, 8))
         jj.jmse(jj.Seidel(w020=6.0), 0.0, 0.2, signal, jj.WhiteNoise(1e-8), preset="fast")
     assert 1.5e6 < 2 * math.pi * 25 / 1e-4 < jj.CHECKED_SNR < 2 * math.pi * 25 / 1e-5
+    # With the closed-form peaks of jmse_jax._ridges the grids hold to CHECKED_SNR_PEAKS
+    # (benchmarks/low_noise.py: 2e8, the same design's gradient 1.5e-4 off with the default,
+    # 7e-7 with high at 1.6e8), and the warning says so.
+    assert 2 * math.pi * 25 / 1e-6 < jj.CHECKED_SNR_PEAKS < 2 * math.pi * 25 / 1e-7
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-5), preset="fast", peaks=True)
+    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+09 is beyond what the polar "
+                                         r"grids with closed-form peaks were checked at"):
+        jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-7), preset="fast", peaks=True)
 
 
 def test_traced_band_past_u_max_is_computed(fig1):

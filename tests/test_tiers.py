@@ -154,8 +154,10 @@ def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
 def test_shortcut_check_runs_in_float32(ab, field, u):
     """The shortcut's check is computed in float32 whatever the merit's dtype and returned
     in that dtype: bit for bit the float32 computation, and within 1e-6 of the float64 one
-    (far inside the acceptance tolerance, 1e-5)."""
+    (far inside the acceptance tolerance, 1e-5). The check grid has no closed-form peaks
+    (``_tier_plans``), so neither do its restatements here."""
     from jmse_jax._merit import _check_value, _compiled_check, _Static, _tier_plans
+
 
     check = jj.DEFAULT_TIERS[1][3].check
     options = _tier_plans(jj.jmse_options(), jj.DEFAULT_TIERS)[1][1][1]  # the plan's check
@@ -187,12 +189,13 @@ def _lowered_independently(coarse_nodes, fine_nodes, drop):
 @pytest.mark.parametrize("ab, field, u, expected", [
     (*DESIGNS[1][:3], 6.0e-6), (*FIRST_KEPT[:3], 1.7e-6), (*DEFOCUS_M6[:3], 4.2e-4),
 ])
-def test_first_grid_estimate_is_the_change_under_lowered_interpolants(monkeypatch, ab, field,
-                                                                      u, expected):
+def test_first_grid_estimate_is_the_change_under_lowered_interpolants(
+        monkeypatch, ab, field, u, expected):
     """The first grid's error estimate is the largest relative change of its value when
     its OTF interpolants lose their top Legendre coefficient, radially or angularly. The
     oracle restates it: the fixed grid's value with interpolation matrices built from
-    NumPy's Legendre fits (patched in), against the same grid's plain value."""
+    NumPy's Legendre fits (patched in), against the same grid's plain value. The first grid
+    has no closed-form peaks (``_tier_plans``), so neither has the oracle."""
     from jmse_jax import _merit
     from jmse_jax._numerics import gauss_legendre
     from jmse_jax._quadrature import _radial_counts, _radial_panels, angular_templates
@@ -220,8 +223,8 @@ def test_first_grid_estimate_is_the_change_under_lowered_interpolants(monkeypatc
 
     values = {}
     for name, drop in (("plain", (0, 0)), ("radial", (1, 0)), ("angular", (0, 1))):
-        def patched(c, f, _drop=(0, 0), drop=drop):
-            l_r, l_a = original(c, f)
+        def patched(c, f, _drop=(0, 0), sub_panel=None, drop=drop):
+            l_r, l_a = original(c, f, (0, 0), sub_panel)
             if (c, f) != (coarse, fine):
                 return l_r, l_a
             return (radial(drop[0]) if drop[0] else l_r,

@@ -1,0 +1,183 @@
+"""Closed-form peaks of ``S_e`` along the polar grid's rays (``jmse_jax._ridges``).
+
+Oracles: SciPy's adaptive quadrature of the same 1-D integrand (an analytic OTF along a
+ray), its finite differences, and, for whole designs near the axis, the polar grid with
+four times the fine radial nodes and no closed forms.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import integrate
+
+import jmse_jax as jj
+from jmse_jax import _merit
+from jmse_jax._quadrature import FINE_SUB_PANEL, _radial_rule, fine_sub_panels
+from jmse_jax._ridges import ridge_peaks
+
+N = 300  # the fine radial count of the default's first grid
+ROOTS = (0.2113, 0.5671)  # zeros of Re H along the ray, between fine nodes
+
+
+def _otf(t, offset, stretch):
+    """An OTF along the ray with two near-zeros: ``Re H`` vanishes at ``ROOTS`` (shifted by
+    ``offset``), ``Im H`` is a small smooth ``offset``-independent term."""
+    r0, r1 = (r + offset for r in ROOTS)
+    re = stretch * (t - r0) * (t - r1) * (1.3 - t)
+    im = 1e-4 * (1.0 + t) if stretch > 0 else 0.0 * t
+    return re, im
+
+
+def _spectra(t):
+    s_x = 1.0 / (1.0 + (3.0 * t) ** 2) ** 1.5
+    return s_x
+
+
+def _ray(offset, noise, stretch=4.0, peaks=True):
+    """``sum bare t S_e`` on one ray of the fine rule of ``N`` nodes (two triangles alike),
+    plus the closed-form peaks when ``peaks``."""
+    t, starts, edges = fine_sub_panels(N)
+    _, w_t = _radial_rule(N, FINE_SUB_PANEL)
+    bare = jnp.asarray(t * w_t)
+    tj = jnp.asarray(t)
+    re, im = _otf(tj, offset, stretch)
+    h = jnp.stack([re, im])[None, :, None, :].repeat(2, axis=2)  # (rows, re/im, tri, N)
+    s_x = _spectra(tj)[None, None, :]
+    s_n = jnp.asarray(noise)
+    denominator = (re * re + im * im) * s_x + s_n
+    s_e = s_x * s_n / denominator
+    total = 2.0 * jnp.sum(s_e * bare)
+    if peaks:
+        total = total + ridge_peaks(h, jnp.broadcast_to(denominator, (1, 2, N)), s_x, s_n,
+                                    t, bare, jnp.ones(1), starts, edges)
+    return total
+
+
+def _exact(offset, noise, stretch=4.0):
+    """SciPy's integral of ``2 t S_e`` over [0, 1], with the near-zeros as breakpoints."""
+    def f(t):
+        re, im = _otf(t, offset, stretch)
+        s_x = _spectra(t)
+        return 2.0 * t * s_x * noise / ((re * re + im * im) * s_x + noise)
+
+    value, _ = integrate.quad(f, 0.0, 1.0, points=[r + offset for r in ROOTS], limit=2000,
+                              epsabs=0.0, epsrel=1e-13)
+    return value
+
+
+@pytest.mark.parametrize(("noise", "rtol"), [(1e-6, 1e-5), (1e-8, 2e-6), (1e-10, 1e-6)])
+def test_peaks_match_the_adaptive_integral(noise, rtol):
+    # The model's error is of second order in the peak's width c (about 1e-3 to 1e-4 of
+    # the ray here; the smallest |H|^2, 1e-8, keeps c from shrinking below 1e-4).
+    exact = _exact(0.0, noise)
+    plain = float(_ray(0.0, noise, peaks=False))
+    corrected = float(_ray(0.0, noise))
+    assert abs(plain / exact - 1.0) > 1e3 * rtol  # the fine rule alone misses the peaks
+    assert corrected == pytest.approx(exact, rel=rtol)
+
+
+def test_resolved_peaks_get_no_correction():
+    # At a noise of 1e-2 the peaks span many fine nodes: nothing is narrow.
+    noise = 1e-2
+    assert float(_ray(0.0, noise)) == float(_ray(0.0, noise, peaks=False))
+    assert float(_ray(0.0, noise)) == pytest.approx(_exact(0.0, noise), rel=1e-12)
+
+
+def test_derivative_follows_the_moving_zeros():
+    # d/d offset of the corrected sum (through H at the fine nodes) against central
+    # differences of the adaptive integral.
+    # The model's second-order error moves with the peak against the nodes, so the
+    # derivative is good to a few 1e-4 where the value is good to a few 1e-6 (the fine
+    # rule alone: 50 and 270 times the derivative, of either sign).
+    step = 1e-5
+    for noise in (1e-6, 1e-8):
+        derivative = float(jax.grad(lambda o, noise=noise: _ray(o, noise))(0.0))
+        plain = float(jax.grad(lambda o, noise=noise: _ray(o, noise, peaks=False))(0.0))
+        reference = (_exact(step, noise) - _exact(-step, noise)) / (2.0 * step)
+        assert derivative == pytest.approx(reference, rel=1e-3)
+        assert abs(plain / reference - 1.0) > 10.0
+
+
+def test_adjoint_equals_autodiff_of_the_value():
+    # The adjoint form (the fine rule's derivatives plus the peaks' at their four nodes)
+    # against jax.grad of the plain correction.
+    t, starts, edges = fine_sub_panels(N)
+    rng = np.random.default_rng(0)
+    re, im = _otf(jnp.asarray(t), 0.0, 4.0)
+    h = jnp.stack([re, im])[None, :, None, :].repeat(2, axis=2)
+    s_x = _spectra(jnp.asarray(t))[None, None, :]
+    s_n = jnp.asarray(1e-8)
+    bare = jnp.asarray(rng.uniform(0.5, 1.0, N) * 1e-3)
+
+    def correction(h):
+        d = h[:, 0] ** 2 + h[:, 1] ** 2
+        return ridge_peaks(h, d * s_x + s_n, s_x, s_n, t, bare, jnp.ones(1), starts, edges)
+
+    g = [jnp.asarray(rng.normal(size=(1, 2, N))) for _ in range(2)]
+    d = h[:, 0] ** 2 + h[:, 1] ** 2
+    value, g_re, g_im = ridge_peaks(h, d * s_x + s_n, s_x, s_n, t, bare, jnp.ones(1),
+                                    starts, edges, adjoint=g)
+    grad = jax.grad(correction)(h)
+    assert float(value) == pytest.approx(float(correction(h)), rel=1e-14)
+    assert float(value) != 0.0
+    np.testing.assert_allclose(g_re - g[0], grad[:, 0], rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(g_im - g[1], grad[:, 1], rtol=1e-12, atol=1e-18)
+
+
+# A design near the axis: its OTF nearly vanishes on rings (benchmarks/low_noise.py).
+NEAR_AXIS = (jj.Seidel(w020=6.0, w222=0.5), 0.1, 0.2)
+TIER1 = jj.DEFAULT_TIERS[1][2]
+
+
+def _grid_value_and_grad(grid, ab, field, u, noise, ridges=True):
+    options = {**jj.jmse_options("default", **grid), "tiers": None, "radial": False,
+               "peaks": ridges}
+
+    def merit(ab, field):
+        return _merit._merit_value(options, jnp.float64, ab, field, jnp.float64(u),
+                                   jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(noise))
+
+    return jax.jit(jax.value_and_grad(merit, argnums=(0, 1)))(ab, jnp.float64(field))
+
+
+def test_near_axis_design_against_a_finer_grid():
+    # The same OTF nodes, so only the fine stage differs; 19 200 fine radial nodes without
+    # closed forms converge (9600 leave 1e-5 in the gradient).
+    ab, field, u = NEAR_AXIS
+
+    def vector(value_and_grad):
+        value, (g_ab, g_field) = value_and_grad
+        return float(value), np.array([g_ab.w020, g_ab.w222, g_field])
+
+    value, grad = vector(_grid_value_and_grad(TIER1, ab, field, u, 1e-4))
+    plain_value, plain_grad = vector(_grid_value_and_grad(TIER1, ab, field, u, 1e-4,
+                                                          ridges=False))
+    finer = {**TIER1, "se_nodes": (19200, 160)}
+    ref_value, ref_grad = vector(_grid_value_and_grad(finer, ab, field, u, 1e-4, ridges=False))
+    scale = np.max(np.abs(ref_grad))
+    assert value == pytest.approx(ref_value, rel=1e-10)
+    assert np.max(np.abs(grad - ref_grad)) < 2e-6 * scale
+    # Without the closed forms: 6e-6 in the value, 5e-2 in the gradient.
+    assert abs(plain_value / ref_value - 1.0) > 1e-6
+    assert np.max(np.abs(plain_grad - ref_grad)) > 1e-2 * scale
+
+
+def test_peaks_option_reaches_the_grid_the_default_routes_to():
+    """``peaks=True`` keeps the default's tiers and gives the grid the design routes to
+    its closed-form peaks; a non-boolean is refused."""
+    ab, field, u = NEAR_AXIS
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
+    route = _merit._route(ab, field, u, signal, noise, peaks=True)
+    assert route["tier"] is not None and route["path"] == "grid"
+    grid = jj.DEFAULT_TIERS[route["tier"]][2]
+    value = float(jj.jmse(ab, field, u, signal, noise, peaks=True))
+    plain = float(jj.jmse(ab, field, u, signal, noise))
+    oracle, _ = _grid_value_and_grad(grid, ab, field, u, 1e-4)
+    assert value == pytest.approx(float(oracle), rel=1e-13)
+    assert abs(plain / value - 1.0) > 1e-8
+    assert jj.jmse_options("high")["peaks"] and not jj.jmse_options()["peaks"]
+    with pytest.raises(ValueError, match="peaks must be True or False"):
+        jj.jmse(ab, field, u, signal, noise, peaks="yes")
