@@ -13,13 +13,15 @@ tolerance 1e-11, breakpoints at the OTF's zeros found on a 400 001-point ray) an
 from ``jmse_jax.otf`` with a (96, 96) overlap rule. Off the axis the reference is the polar
 grid ``REFERENCE`` (22 400 fine radial nodes), checked against ``CHECK`` (half as many).
 
-Compared: ``jmse`` with the ``fast``, ``default`` and ``high`` presets, the explicit polar
-grid ``FINE`` (what the warning's "finer se_nodes" means), and on the axis the default
-without the one-ray plan's closed-form peaks (``jmse_jax._radial._zero_peaks``; the
-package before they were added). Findings feed ``CHECKED_SNR`` (README, "Accuracy at low
-noise"). The near-axis designs (6 waves of defocus with 0.5 wave of coma or astigmatism at
-field 0.1, and a weaker mix at field 0.3) are the polar grid's hard case: their OTF nearly
-vanishes on rings.
+Compared (``COMPARED``): ``jmse`` with the ``fast`` and ``default`` presets, the default with
+``peaks=True`` (the closed-form peaks of the polar grids, ``jmse_jax._ridges``), ``high``
+(which has them) and ``high`` without them, the explicit polar grid ``FINE`` with them, and on
+the axis the default without the one-ray plan's closed-form peaks
+(``jmse_jax._radial._zero_peaks``; the package before them). Findings feed ``CHECKED_SNR``
+and ``CHECKED_SNR_PEAKS`` (README, "Accuracy at low noise"). The near-axis designs (6 waves of
+defocus with 0.5 wave of coma or astigmatism at field 0.1, and a weaker mix at field 0.3) are
+the polar grid's hard case: their OTF nearly vanishes on rings. The references ``REFERENCE``
+and ``CHECK`` have the closed-form peaks too (and are compared with ``REFERENCE`` without).
 
 Gradients. The bank's gradient tests compare ``jax.grad`` with finite differences of the
 same grid, so they cannot see a grid that resolves neither. Here the presets' gradients in
@@ -28,7 +30,7 @@ polar grid ``REFERENCE`` (itself checked against ``CHECK``'s), for the off-axis 
 noise 1e-4, 1e-5 and 1e-6: the error is the largest component's difference over the
 largest component of the reference gradient.
 
-Usage (from the repository root; about 12 min on 2 cores, the gradients about 6 more)::
+Usage (from the repository root; about 25 min on 2 cores with the gradients)::
 
     .venv/bin/python benchmarks/low_noise.py [--values-only | --gradients-only]
 

@@ -80,7 +80,8 @@ CHECKED_SNR = 2e6
 #: ``CHECKED_SNR`` for calls with ``peaks=True`` (the ``"high"`` preset), whose polar grids
 #: integrate those peaks in closed form (``jmse_jax._ridges``): checked near the axis to
 #: a peak ratio of 1.6e8 (``benchmarks/low_noise.py``: values within 7e-6 (default) and
-#: 3e-9 (``"high"``) up to 1.6e9, gradients within 1.5e-4 and 7e-7 at 1.6e8).
+#: 3e-9 (``"high"``) up to 1.6e9; gradients within 5e-5 and 4e-7 at 1.6e7, 7e-4 and 3e-6 at
+#: 1.6e8: near the axis at high SNR take ``"high"``).
 CHECKED_SNR_PEAKS = 2e8
 
 

@@ -449,8 +449,8 @@ def test_noise_beyond_the_checked_snr_warns():
         jj.jmse(jj.Seidel(w020=6.0), 0.0, 0.2, signal, jj.WhiteNoise(1e-8), preset="fast")
     assert 1.5e6 < 2 * math.pi * 25 / 1e-4 < jj.CHECKED_SNR < 2 * math.pi * 25 / 1e-5
     # With the closed-form peaks of jmse_jax._ridges the grids hold to CHECKED_SNR_PEAKS
-    # (benchmarks/low_noise.py: 2e8, the same design's gradient 1.5e-4 off with the default,
-    # 7e-7 with high at 1.6e8), and the warning says so.
+    # (benchmarks/low_noise.py: 2e8; the same design's value 6e-6 off with the default's
+    # tiers, 1e-10 with high at 1.6e8), and the warning says so.
     assert 2 * math.pi * 25 / 1e-6 < jj.CHECKED_SNR_PEAKS < 2 * math.pi * 25 / 1e-7
     with warnings.catch_warnings():
         warnings.simplefilter("error")
