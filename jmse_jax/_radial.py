@@ -182,6 +182,24 @@ def _model_integral(r0, c, k, z):
     return r0 * at_r0 + c * at_z
 
 
+def _window_change(x, bare, begin, end, lower, upper, x0, c, k, span):
+    """Per peak (``(P,)`` each but ``x`` and ``bare``, the fine nodes and bare weights): the
+    closed-form integral of the model ``M((x - x0) / c) (x0 + c z)`` of ``_model_integral``
+    over the window ``[lower, upper]`` less the fine rule's sum of ``M`` over the window's
+    nodes ``begin .. end - 1`` (at most ``span``): what replaces the rule's sum there."""
+    index = begin[:, None] + jnp.arange(span)
+    inside = index < end[:, None]
+    index = jnp.minimum(index, x.shape[0] - 1)
+    z = (x[index] - x0[:, None]) / c[:, None]
+    u = 1.0 + z * z
+    k_s, k_q, k_t = (a[:, None] for a in k)
+    model = (1.0 + k_s * z) / u - (k_q * z * z + k_t) * z / (u * u)
+    summed = jnp.sum(jnp.where(inside, bare[index] * model, 0.0), axis=-1)
+    exact = c * (_model_integral(x0, c, k, (upper - x0) / c)
+                 - _model_integral(x0, c, k, (lower - x0) / c))
+    return exact - summed
+
+
 def _cubic(x, y, z):
     """Value, first and second derivative at ``z`` of the cubic through ``(x, y)`` (last axis
     4), from Newton's divided differences."""
@@ -276,18 +294,10 @@ def _zero_peaks(h, r, bare, s_x, s_n, rule, edges, theta, signal, noise):
     first = jnp.maximum(home - 1, jnp.asarray(rule.piece_first)[home])
     last = jnp.minimum(home + 1, jnp.asarray(rule.piece_last)[home])
     span = 3 * int(np.max(np.diff(rule.starts)))
-    index = starts[first][:, None] + jnp.arange(span)
-    inside = index < starts[last + 1][:, None]
-    index = jnp.minimum(index, n - 1)
-    z = (r[index] - r0[:, None]) / c[:, None]
-    u = 1.0 + z * z
-    k_s, k_q, k_t = (x[:, None] for x in k)
-    model = (1.0 + k_s * z) / u - (k_q * z * z + k_t) * z / (u * u)
-    summed = jnp.sum(jnp.where(inside, bare[index] * model, 0.0), axis=-1)
-    exact = c * (_model_integral(r0, c, k, (upper[last] - r0) / c)
-                 - _model_integral(r0, c, k, (lower[first] - r0) / c))
+    change = _window_change(r, bare, starts[first], starts[last + 1], lower[first],
+                            upper[last], r0, c, k, span)
     peak = s_x0 * theta0
-    return jnp.sum(jnp.where(live, peak * (exact - summed), 0.0))
+    return jnp.sum(jnp.where(live, peak * change, 0.0))
 
 
 class _RayRule(NamedTuple):

@@ -49,7 +49,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._radial import _model_integral
+from ._radial import _window_change
 
 __all__ = ["ridge_peaks"]
 
@@ -173,18 +173,9 @@ def _peaks(y_re, y_im, y_q, y_n, j, live, stencil, t, bare, starts, edges):
     last = jnp.minimum(home + 1, count - 1)
     span = 3 * int(np.max(np.diff(starts)))
     starts_j = jnp.asarray(starts)
-    index = starts_j[first][:, None] + jnp.arange(span)
-    inside = index < starts_j[last + 1][:, None]
-    index = jnp.minimum(index, n - 1)
-    z = (t[index] - t0[:, None]) / c[:, None]
-    u = 1.0 + z * z
-    k_s, k_q, k_t = (a[:, None] for a in k)
-    model = (1.0 + k_s * z) / u - (k_q * z * z + k_t) * z / (u * u)
-    summed = jnp.sum(jnp.where(inside, bare[index] * model, 0.0), axis=-1)
-    ends = (jnp.stack([edges_j[last + 1], edges_j[first]], axis=-1) - t0[:, None]) / c[:, None]
-    at_ends = _model_integral(t0[:, None], c[:, None], tuple(a[:, None] for a in k), ends)
-    exact = c * (at_ends[:, 0] - at_ends[:, 1])
-    return jnp.where(live, (n0 / e0) * (exact - summed), 0.0)
+    change = _window_change(t, bare, starts_j[first], starts_j[last + 1], edges_j[first],
+                            edges_j[last + 1], t0, c, k, span)
+    return jnp.where(live, (n0 / e0) * change, 0.0)
 
 
 def ridge_peaks(h, denominator, s_x, s_n, t, bare, row_weights, starts, edges,
