@@ -31,11 +31,14 @@ where the plain rule is 4e-2 off, 6e-7 below; the derivative, a few 1e-4 where t
 rule's is 50 times off).
 
 Cost: the search is one fused reduction over the fine grid; the closed forms run only in a
-block that holds a narrow minimum (``lax.cond``). The compile is what counts: each grid with
-the peaks adds about 1.1 s to the compile of a program that holds it and 2.7 s with a
-gradient (most of it the eight forward-mode directions of the adjoint), so that the
-default's four tier grids with them took the Fig. 1 point's compile from 13 to 19 s (value)
-and from 29 to 40 s (``value_and_grad``), one core. Under ``vmap`` the ``lax.cond`` becomes
+block that holds a narrow minimum (``lax.cond``). Where they run they cost: 6 waves of
+defocus with 0.5 of astigmatism at field 0.1 and noise 1e-4 took ``value_and_grad`` from
+5.2 to 13.4 ms with the ``fast`` grid and from 19.5 to 31.5 ms with the default's tiers
+(one core; 20.5 and 38.2 ms before the adjoint's split into forward and reverse parts).
+The compile counts too: each grid with the peaks adds about 1.1 s to the compile of a
+program that holds it and 2.7 s with a gradient, so that the default's four tier grids
+with them took the Fig. 1 point's compile from 13 to 19 s (value) and from 29 to 40 s
+(``value_and_grad``), one core. Under ``vmap`` the ``lax.cond`` becomes
 a select and the closed forms run for every design of the batch: on 32 random designs
 (coefficients within +-3 waves, u = 0.3) ``value_and_grad`` took 1.5 times the time per
 design (default) and 3 times (``fast``). The peaks are therefore the option ``peaks`` of
@@ -122,12 +125,11 @@ def _search(d, narrow):
     return j, held[chosen], stencil
 
 
-def _peaks(y_re, y_im, y_q, y_n, j, live, stencil, t, bare, starts, edges):
-    """The corrections ``(P,)`` to ``sum(bare S_e)`` of the minima found by ``_search`` along
-    one ray (module docstring): ``y_re, y_im, y_q, y_n`` are ``Re H``, ``Im H``,
-    ``S_n / S_x`` and ``S_n`` at each minimum's ``stencil`` (``(P, 4)``); ``t`` and ``bare``
-    the fine nodes and bare weights, ``starts`` and ``edges`` their sub-panels
-    (``fine_sub_panels``)."""
+def _fit(y_re, y_im, y_q, y_n, j, live, stencil, t):
+    """The model of each minimum found by ``_search`` along one ray (module docstring):
+    ``y_re, y_im, y_q, y_n`` are ``Re H``, ``Im H``, ``S_n / S_x`` and ``S_n`` at each
+    minimum's ``stencil`` (``(P, 4)``), ``t`` the fine nodes. Returns ``(t0, c, k_s, k_q,
+    k_t, S_n0 / e0)`` (``(P,)`` each; harmless values where not ``live``) and ``live``."""
     n = t.shape[0]
     # Entries without a live minimum get a harmless stencil, so that no derivative is NaN.
     dummy = jnp.arange(4, dtype=t.dtype)
@@ -139,9 +141,13 @@ def _peaks(y_re, y_im, y_q, y_n, j, live, stencil, t, bare, starts, edges):
     c = _divided_differences(x, y)
     jl, jr = jnp.maximum(j - 1, 0), jnp.minimum(j + 1, n - 1)
     lo, hi = jnp.where(live, t[jl], 1.0), jnp.where(live, t[jr], 2.0)
-    # Newton's method on (|p|^2)' / 2 = Re(p conj p') from the node's own position.
+    # Newton's method on (|p|^2)' / 2 = Re(p conj p') from the node's own position. The
+    # steps before the last are not differentiated: at the minimum the last step's
+    # derivative is the implicit one, -d(slope) / bend.
     t0 = jnp.where(live, t[j], 1.5)
-    for _ in range(_NEWTON):
+    for step in range(_NEWTON + 1):
+        if step == _NEWTON:
+            t0 = jax.lax.stop_gradient(t0)
         p, dp, d2p, _ = _cubic(x, c, t0)
         slope = jnp.sum(p[:, :2] * dp[:, :2], axis=-1)
         bend = jnp.sum(dp[:, :2] * dp[:, :2] + p[:, :2] * d2p[:, :2], axis=-1)
@@ -159,8 +165,15 @@ def _peaks(y_re, y_im, y_q, y_n, j, live, stencil, t, bare, starts, edges):
     n0 = jnp.where(live, n0, 1.0)
     t0 = jnp.where(live, t0, 1.5)
     c = jnp.sqrt(e0 / g2)
-    k = (c * dn / n0, c * kappa / g2, c * dq / e0)
-    # Window: the sub-panel that holds t0 and its neighbours.
+    return (t0, c, c * dn / n0, c * kappa / g2, c * dq / e0, n0 / e0), live
+
+
+def _window(model, live, j, t, bare, starts, edges):
+    """The corrections ``(P,)`` to ``sum(bare S_e)`` along one ray of the minima with the
+    ``model`` of ``_fit``: over the sub-panel that holds each ``t0`` and its neighbours, the
+    model's integral in closed form less the fine rule's sum of it (``bare``: the bare
+    weights; ``starts`` and ``edges``: the sub-panels, ``fine_sub_panels``)."""
+    t0, c, k_s, k_q, k_t, scale = model
     count = len(starts) - 1
     ids = np.repeat(np.arange(count), np.diff(starts))
     edges_j = jnp.asarray(edges, t.dtype)
@@ -174,8 +187,8 @@ def _peaks(y_re, y_im, y_q, y_n, j, live, stencil, t, bare, starts, edges):
     span = 3 * int(np.max(np.diff(starts)))
     starts_j = jnp.asarray(starts)
     change = _window_change(t, bare, starts_j[first], starts_j[last + 1], edges_j[first],
-                            edges_j[last + 1], t0, c, k, span)
-    return jnp.where(live, (n0 / e0) * change, 0.0)
+                            edges_j[last + 1], t0, c, (k_s, k_q, k_t), span)
+    return jnp.where(live, scale * change, 0.0)
 
 
 def ridge_peaks(h, denominator, s_x, s_n, t, bare, row_weights, starts, edges,
@@ -219,24 +232,30 @@ def ridge_peaks(h, denominator, s_x, s_n, t, bare, row_weights, starts, edges,
         spectra = [jnp.take_along_axis(a, stencil.reshape(a.shape[0], -1), axis=1).reshape(
             stencil.shape) for a in (q, s_n)]
 
-        def per_peak(y_re, y_im):  # (rays, P): each peak's correction, from its own nodes
-            return jax.vmap(lambda *a: _peaks(*a, t_j, bare, starts, edges))(
-                y_re, y_im, *spectra, j, live, stencil)
+        def fit(y_re, y_im):  # each peak's model (rays, P), from its own nodes
+            return jax.vmap(lambda *a: _fit(*a, t_j))(y_re, y_im, *spectra, j, live, stencil)
 
         weights = jnp.repeat(row_weights, triangles)[:, None]  # (rays, 1)
+
+        def total(model, alive):
+            return jnp.sum(weights * jax.vmap(
+                lambda *a: _window(*a, t_j, bare, starts, edges))(model, alive, j))
+
         y = tuple(part[index].reshape(stencil.shape) for part in (h_re, h_im))
         if adjoint is None:
-            return jnp.sum(weights * per_peak(*y))
-        # Each peak depends on its own eight stencil values, so eight forward-mode
-        # directions (the k-th value of every stencil at once) give every derivative; a
-        # reverse pass compiled to about 1.5 times the program.
+            return total(*fit(*y))
+        # Each peak's model depends on its own eight stencil values, so eight forward-mode
+        # directions (the k-th value of every stencil at once) give its derivatives; the
+        # window's sum over some 48 nodes, which costs most, is differentiated once in
+        # reverse mode in the model's six numbers (eight forward directions through it took
+        # three times as long).
+        model, linear, alive = jax.linearize(fit, *y, has_aux=True)
         basis = jnp.eye(8, dtype=h.dtype).reshape(8, 2, 1, 1, 4)
-        value, slopes = jax.vmap(
-            lambda e: jax.jvp(per_peak, y, tuple(jnp.broadcast_to(x, stencil.shape)
-                                                 for x in e)),
-            out_axes=(None, 0))(basis)
-        slopes = weights[None] * slopes  # (8, rays, P)
-        return (jnp.sum(weights * value),
+        d_model = jax.vmap(lambda e: linear(*(jnp.broadcast_to(x, stencil.shape)
+                                              for x in e)))(basis)
+        value, partial = jax.value_and_grad(total)(model, alive)
+        slopes = sum(p[None] * d for p, d in zip(partial, d_model, strict=True))  # (8, rays, P)
+        return (value,
                 *(part.reshape(-1).at[index].add(
                     jnp.moveaxis(slopes[4 * i:4 * i + 4], 0, -1).reshape(-1)).reshape(part.shape)
                   for i, part in enumerate(g)))
