@@ -1341,9 +1341,10 @@ def jmse(
     A concrete design whose ``aberration_strength`` exceeds what the presets were checked
     at (``CHECKED_STRENGTH``, 25; 45 for rotationally symmetric designs) gets a
     ``UserWarning`` unless grid options are given, and so does a peak ``max S_x / S_n``
-    above ``CHECKED_SNR`` (2e6) for a design that takes a polar grid: where the OTF nearly
-    vanishes on a ring the peaks of ``S_e`` outgrow the grids (README, "Accuracy at low
-    noise"; a rotationally symmetric design's one-ray plan integrates them exactly).
+    above ``CHECKED_SNR`` (2e6; ``CHECKED_SNR_PEAKS``, 2e8, with ``peaks``) for a design
+    that takes a polar grid: where the OTF nearly vanishes on a ring the peaks of ``S_e``
+    outgrow the grids (README, "Accuracy at low noise"; a rotationally symmetric design's
+    one-ray plan integrates them exactly).
     Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
     under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u``, the spectra's
     parameters) give ``+inf`` (never NaN) with zero gradient.
