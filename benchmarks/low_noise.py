@@ -30,7 +30,7 @@ polar grid ``REFERENCE`` (itself checked against ``CHECK``'s), for the off-axis 
 noise 1e-4, 1e-5 and 1e-6: the error is the largest component's difference over the
 largest component of the reference gradient.
 
-Usage (from the repository root; about 25 min on 2 cores with the gradients)::
+Usage (from the repository root; about 14 min on 2 cores with the gradients)::
 
     .venv/bin/python benchmarks/low_noise.py [--values-only | --gradients-only]
 
