@@ -251,10 +251,10 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
     check_count("B", options["B"])
     options["overlap_nodes"] = _pair("overlap_nodes", options["overlap_nodes"])
     check_count("overlap_floor", options["overlap_floor"])
+    options["overlap_floor"] = int(options["overlap_floor"])
     if not isinstance(options["peaks"], (bool, np.bool_)):
         raise ValueError(f"peaks must be True or False, got {options['peaks']!r}")
     options["peaks"] = bool(options["peaks"])
-    options["overlap_floor"] = int(options["overlap_floor"])
     if options["quadrature"] == "polar":
         options["nodes"] = _pair("nodes", options["nodes"])
         # One node at least on each of the three radial panels (``_quadrature``).
@@ -384,10 +384,6 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
         start = stop
     return jnp.concatenate(parts, axis=-1)
 
-
-#: Private switch for studies: False drops the closed-form peaks of ``jmse_jax._ridges``
-#: (the option ``peaks``) from every polar grid.
-_RIDGES = True
 
 #: Fine S_e nodes per block of angular rows (see ``_fine_blocks``).
 _FINE_BLOCK_POINTS = 1 << 16
@@ -603,7 +599,7 @@ def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror,
                                          noise(coarse.nu_x, coarse.nu_y))
             s_x_out = signal(coarse.outer_nu_x, coarse.outer_nu_y)  # H = 0 past the cutoff
             return jnp.sum(coarse.weights * s_e) + jnp.sum(coarse.outer_weights * s_x_out)
-        ridges = bool(options.get("peaks", False)) and _RIDGES
+        ridges = bool(options.get("peaks", False))
         total = _fine_stage(h, u, signal, noise, options["nodes"], options["se_nodes"], dtype,
                             ridges)
         if estimate:

@@ -144,12 +144,13 @@ def fine_sub_panels(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(t, starts, edges)`` of the fine radial rule of ``n`` nodes: its nodes in ``t`` and
     its sub-panels; sub-panel ``p`` holds nodes ``starts[p]`` to ``starts[p + 1] - 1`` and
     covers ``[edges[p], edges[p + 1]]`` (``P + 1`` entries each)."""
-    sizes, edges = [], [0.0]
+    nodes, sizes, edges = [], [], [0.0]
     for (a, b), k in zip(_radial_panels(), _radial_counts(n), strict=True):
-        _, _, s, e = _panel_rule(k, a, b, FINE_SUB_PANEL)
+        x, _, s, e = _panel_rule(k, a, b, FINE_SUB_PANEL)
+        nodes.append(x)
         sizes.extend(s)
         edges.extend(e[1:])
-    return (_radial_rule(n, FINE_SUB_PANEL)[0], np.concatenate([[0], np.cumsum(sizes)]),
+    return (np.concatenate(nodes), np.concatenate([[0], np.cumsum(sizes)]),
             np.asarray(edges))
 
 

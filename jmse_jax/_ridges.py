@@ -202,9 +202,10 @@ def ridge_peaks(h, denominator, s_x, s_n, t, bare, row_weights, starts, edges,
     and ``Im H``), returns ``(correction, g_re + d/dRe H, g_im + d/dIm H)``.
 
     Nothing but the search runs when no minimum is narrow (a ``lax.cond`` on one fused
-    reduction), and the branch takes and returns only small arrays (its operands and
-    results are copied): the correction depends on ``H`` at four nodes per minimum, and its
-    derivative is added to the fine rule's at those nodes.
+    reduction). The branch's operands and results are copied, so it takes ``H`` and the
+    spectra but not ``denominator`` (it recomputes it), and returns a scalar (with the
+    adjoint, the fine rule's derivatives too): the correction depends on ``H`` at four
+    nodes per minimum, and its derivative is added to the fine rule's at those nodes.
     """
     rows, _, triangles, n = h.shape
     shape = (rows, triangles, n)

@@ -158,7 +158,6 @@ def test_shortcut_check_runs_in_float32(ab, field, u):
     (``_tier_plans``), so neither do its restatements here."""
     from jmse_jax._merit import _check_value, _compiled_check, _Static, _tier_plans
 
-
     check = jj.DEFAULT_TIERS[1][3].check
     options = _tier_plans(jj.jmse_options(), jj.DEFAULT_TIERS)[1][1][1]  # the plan's check
     float64 = jnp.dtype(jnp.float64)
