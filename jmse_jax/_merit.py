@@ -26,6 +26,8 @@ from ._numerics import (
     check_range,
     common_dtype,
     is_concrete,
+    spread_batch,
+    with_batching_rule,
 )
 from ._otf import OTF_METHODS, _otf_fft, _otf_nudft, _otf_overlap, otf_fft_grid
 from ._quadrature import (
@@ -961,28 +963,9 @@ def _dispatch(plans, dtype, with_grad):
         return jax.lax.switch(index, branches, operands)
 
     # Derivatives of the dispatch itself (second derivatives of ``jmse``, e.g. a Hessian)
-    # differentiate the plain switch: ``custom_vmap`` has no rule for them.
-    @jax.custom_jvp
-    def run(index, operands):
-        return batched(index, operands)
-
-    @run.defjvp
-    def run_jvp(primals, tangents):
-        return jax.jvp(switch, primals, tangents)
-
-    @jax.custom_batching.custom_vmap
-    def batched(index, operands):
-        return switch(index, operands)
-
-    @batched.def_vmap
+    # differentiate the plain switch (``with_batching_rule``).
     def run_batched(axis_size, in_batched, index, operands):
-        index_batched, operands_batched = in_batched
-
-        def spread(x, batched):
-            return x if batched else jnp.broadcast_to(x, (axis_size, *jnp.shape(x)))
-
-        index = spread(index, index_batched)
-        operands = jax.tree_util.tree_map(spread, operands, operands_batched)
+        index, operands = spread_batch(axis_size, (index, operands), in_batched)
         shape = jax.eval_shape(jax.vmap(branches[0]), operands)
         zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shape)
         out = zeros
@@ -992,7 +975,7 @@ def _dispatch(plans, dtype, with_grad):
             out = jax.tree_util.tree_map(functools.partial(_select, mask), result, out)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
-    return run
+    return with_batching_rule(switch, run_batched)
 
 
 def _select(mask, chosen, other):

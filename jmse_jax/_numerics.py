@@ -21,6 +21,7 @@ __all__ = [
     "abs2",
     "all_finite",
     "barycentric_matrix",
+    "batch_skipping_cond",
     "check_choice",
     "check_count",
     "check_finite_tree",
@@ -36,6 +37,8 @@ __all__ = [
     "safe_arccos",
     "safe_norm",
     "safe_sqrt",
+    "spread_batch",
+    "with_batching_rule",
 ]
 
 
@@ -206,6 +209,89 @@ def materialise(*arrays):
     """
     one = runtime_one(arrays[0])
     return tuple(a / one for a in arrays)
+
+
+def spread_batch(axis_size, tree, batched):
+    """``tree`` with every leaf not marked in ``batched`` (a ``custom_vmap`` rule's
+    ``in_batched``) broadcast along a new leading axis of ``axis_size``."""
+    def spread(x, is_batched):
+        return x if is_batched else jnp.broadcast_to(x, (axis_size, *jnp.shape(x)))
+
+    return jax.tree_util.tree_map(spread, tree, batched)
+
+
+def with_batching_rule(fun, rule):
+    """``fun`` (positional arguments) with the ``vmap`` rule ``rule`` (``custom_vmap``'s
+    signature: ``rule(axis_size, in_batched, *args) -> (out, out_batched)``).
+
+    Derivatives go through ``fun`` itself (``custom_vmap`` has no reverse-mode rule, and a
+    derivative rule for the batching would be a second copy of it), so ``vmap`` of a
+    derivative batches ``fun`` as JAX does. A rule called with nothing batched (``vmap``
+    batching a traced body, as under ``jax.hessian``) is not consulted: ``fun`` runs as it
+    is, unbatched.
+    """
+
+    @jax.custom_batching.custom_vmap
+    def batched(*args):
+        return fun(*args)
+
+    @batched.def_vmap
+    def batched_rule(axis_size, in_batched, *args):
+        if not any(jax.tree_util.tree_leaves(in_batched)):
+            out = fun(*args)
+            return out, jax.tree_util.tree_map(lambda _: False, out)
+        return rule(axis_size, tuple(in_batched), *args)
+
+    @jax.custom_jvp
+    def run(*args):
+        return batched(*args)
+
+    @run.defjvp
+    def run_jvp(primals, tangents):
+        return jax.jvp(fun, primals, tangents)
+
+    return run
+
+
+def batch_skipping_cond(pred, true_fn, false_fn, operands):
+    """``lax.cond(pred, true_fn, false_fn, operands)`` that still skips ``true_fn`` under
+    ``vmap``.
+
+    ``vmap`` of a ``lax.cond`` whose predicate is batched evaluates both branches for every
+    member of the batch and selects. Here the batch runs ``true_fn`` (vectorised) only when
+    the predicate holds for some member, inside a ``lax.cond`` on that (unbatched) fact, and
+    each member gets its own branch's result, exactly as alone. For a ``true_fn`` that is
+    costly and rarely needed (the closed-form peaks of ``jmse_jax._ridges``).
+
+    The branches must close over no traced value (``operands`` carry every array they
+    use): the batching rule (``custom_vmap``) may run after the trace that made such a
+    value has ended (``vmap`` of a ``lax.scan`` batches the scan's traced body).
+    Derivatives of the call go through the plain ``lax.cond`` (``custom_vmap`` has no
+    reverse-mode rule), so ``vmap`` of a derivative of it runs both branches; a value that
+    is only evaluated inside a derivative rule (as ``jmse_jax._merit._fine_stage_jvp``
+    evaluates the peaks' adjoint) keeps the skip.
+    """
+
+    def plain(pred, operands):
+        return jax.lax.cond(pred, true_fn, false_fn, operands)
+
+    def rule(axis_size, in_batched, pred, operands):
+        pred_batched = in_batched[0]
+        pred, operands = spread_batch(axis_size, (pred, operands), in_batched)
+        on, off = jax.vmap(true_fn), jax.vmap(false_fn)
+        if pred_batched:
+            def either(ops):
+                def select(a, b):
+                    return jnp.where(pred.reshape(pred.shape + (1,) * (a.ndim - 1)), a, b)
+
+                return jax.tree_util.tree_map(select, on(ops), off(ops))
+
+            out = jax.lax.cond(jnp.any(pred), either, off, operands)
+        else:
+            out = jax.lax.cond(pred[0], on, off, operands)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return with_batching_rule(plain, rule)(pred, operands)
 
 
 def common_dtype(*args):

@@ -203,3 +203,72 @@ def test_materialise_changes_values_and_derivatives_by_at_most_an_ulp():
     grad = jax.grad(lambda v: jnp.sum(nm.materialise(v, 3.0 * v)[1] ** 2))(x)
     np.testing.assert_allclose(np.asarray(grad), np.asarray(18.0 * x), rtol=7e-16, atol=0)
     np.testing.assert_allclose(np.asarray(nm.runtime_one(x)), np.ones(101), rtol=2.3e-16)
+
+
+def _counting_branches(calls):
+    def costly(x):
+        jax.debug.callback(lambda: calls.append(1))
+        return jnp.sin(x) * x, x + 1.0
+
+    def cheap(x):
+        return jnp.zeros_like(x), x
+
+    return costly, cheap
+
+
+def test_batch_skipping_cond_skips_the_branch_no_member_takes():
+    calls = []
+    costly, cheap = _counting_branches(calls)
+
+    def skipping(x):
+        return nm.batch_skipping_cond(x > 1.0, costly, cheap, x)
+
+    def plain(x):
+        return jax.lax.cond(x > 1.0, costly, cheap, x)
+
+    none = jnp.array([0.1, 0.5, 0.9])
+    some = jnp.array([0.1, 1.5, 0.9, 2.5])
+    for fn, expect_calls in ((skipping, 0), (plain, 1)):
+        calls.clear()
+        jax.block_until_ready(jax.jit(jax.vmap(fn))(none))
+        assert (len(calls) > 0) == bool(expect_calls)  # plain cond: a select runs both
+    # Each member gets its own branch's result, bit for bit as alone, in either batch and
+    # with an unbatched predicate (the operands batched or not).
+    for xs in (none, some):
+        out = jax.jit(jax.vmap(skipping))(xs)
+        alone = [jax.jit(plain)(x) for x in xs]
+        for i in range(len(xs)):
+            assert float(out[0][i]) == float(alone[i][0])
+            assert float(out[1][i]) == float(alone[i][1])
+    flag = jax.vmap(lambda x: nm.batch_skipping_cond(True, costly, cheap, x))(some)
+    np.testing.assert_array_equal(flag[0], jnp.sin(some) * some)
+    flag = jax.vmap(lambda p: nm.batch_skipping_cond(p, costly, cheap, jnp.float64(2.0)))(
+        jnp.array([True, False]))
+    np.testing.assert_array_equal(flag[0], [jnp.sin(2.0) * 2.0, 0.0])
+
+
+def test_batch_skipping_cond_derivatives():
+    # Forward and reverse mode, and vmap of them, as those of lax.cond (the branch taken).
+    _, cheap = _counting_branches([])
+
+    def costly(x):
+        return jnp.sin(x) * x, x * x
+
+    def fn(x):
+        value, other = nm.batch_skipping_cond(x > 1.0, costly, cheap, x)
+        return value + 0.5 * other
+
+    def exact(x):
+        return jnp.where(x > 1.0, jnp.sin(x) * x + 0.5 * x * x, 0.5 * x)
+
+    def slope(x):
+        return jnp.where(x > 1.0, jnp.cos(x) * x + jnp.sin(x) + x, 0.5)
+
+    xs = jnp.array([0.3, 1.2, 2.7])
+    np.testing.assert_allclose(jax.vmap(jax.grad(fn))(xs), slope(xs), rtol=1e-14)
+    np.testing.assert_allclose(jax.vmap(lambda x: jax.jvp(fn, (x,), (1.0,))[1])(xs),
+                               slope(xs), rtol=1e-14)
+    np.testing.assert_allclose(jax.jit(jax.vmap(jax.value_and_grad(fn)))(xs)[0], exact(xs),
+                               rtol=1e-14)
+    for x in xs:
+        assert float(jax.grad(fn)(x)) == pytest.approx(float(slope(x)), rel=1e-14)
