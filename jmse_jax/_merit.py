@@ -26,6 +26,7 @@ from ._numerics import (
     check_range,
     common_dtype,
     is_concrete,
+    select_batch,
     spread_batch,
     with_batching_rule,
 )
@@ -972,14 +973,10 @@ def _dispatch(plans, dtype, with_grad):
         for tier, plan in enumerate(plans):
             mask = index == tier
             result = _batched_tier(plan, dtype, with_grad, mask, operands, zeros)
-            out = jax.tree_util.tree_map(functools.partial(_select, mask), result, out)
+            out = jax.tree_util.tree_map(functools.partial(select_batch, mask), result, out)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return with_batching_rule(switch, run_batched)
-
-
-def _select(mask, chosen, other):
-    return jnp.where(mask.reshape(mask.shape + (1,) * (chosen.ndim - 1)), chosen, other)
 
 
 def _batched_tier(plan, dtype, with_grad, mask, operands, zeros):
@@ -1017,13 +1014,14 @@ def _batched_tier(plan, dtype, with_grad, mask, operands, zeros):
                 return result, accepted
             trial, kept = jax.lax.cond(jnp.any(mask & eligible & ~accepted), second,
                                        lambda ops: (zeros, refused), ops)
-            result = jax.tree_util.tree_map(functools.partial(_select, accepted), result, trial)
+            result = jax.tree_util.tree_map(functools.partial(select_batch, accepted), result,
+                                            trial)
             return result, accepted | kept
 
         trial, accepted = jax.lax.cond(jnp.any(mask & eligible), attempt,
                                        lambda ops: (zeros, refused), ops)
         own = jax.lax.cond(jnp.any(mask & ~accepted), merit(grid), skip, ops)
-        return jax.tree_util.tree_map(functools.partial(_select, accepted), trial, own)
+        return jax.tree_util.tree_map(functools.partial(select_batch, accepted), trial, own)
 
     return jax.lax.cond(jnp.any(mask), with_shortcut, skip, operands)
 

@@ -37,6 +37,7 @@ __all__ = [
     "safe_arccos",
     "safe_norm",
     "safe_sqrt",
+    "select_batch",
     "spread_batch",
     "with_batching_rule",
 ]
@@ -220,6 +221,11 @@ def spread_batch(axis_size, tree, batched):
     return jax.tree_util.tree_map(spread, tree, batched)
 
 
+def select_batch(mask, chosen, other):
+    """``chosen`` where the batch's ``mask`` (leading axis) holds, else ``other``."""
+    return jnp.where(mask.reshape(mask.shape + (1,) * (chosen.ndim - 1)), chosen, other)
+
+
 def with_batching_rule(fun, rule):
     """``fun`` (positional arguments) with the ``vmap`` rule ``rule`` (``custom_vmap``'s
     signature: ``rule(axis_size, in_batched, *args) -> (out, out_batched)``).
@@ -276,19 +282,16 @@ def batch_skipping_cond(pred, true_fn, false_fn, operands):
         return jax.lax.cond(pred, true_fn, false_fn, operands)
 
     def rule(axis_size, in_batched, pred, operands):
-        pred_batched = in_batched[0]
-        pred, operands = spread_batch(axis_size, (pred, operands), in_batched)
+        operands = spread_batch(axis_size, operands, in_batched[1])
         on, off = jax.vmap(true_fn), jax.vmap(false_fn)
-        if pred_batched:
+        if in_batched[0]:
             def either(ops):
-                def select(a, b):
-                    return jnp.where(pred.reshape(pred.shape + (1,) * (a.ndim - 1)), a, b)
-
-                return jax.tree_util.tree_map(select, on(ops), off(ops))
+                return jax.tree_util.tree_map(functools.partial(select_batch, pred), on(ops),
+                                              off(ops))
 
             out = jax.lax.cond(jnp.any(pred), either, off, operands)
         else:
-            out = jax.lax.cond(pred[0], on, off, operands)
+            out = jax.lax.cond(pred, on, off, operands)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return with_batching_rule(plain, rule)(pred, operands)
