@@ -22,6 +22,7 @@ __all__ = [
     "all_finite",
     "barycentric_matrix",
     "batch_skipping_cond",
+    "SEQUENTIAL_BRANCH_BACKENDS",
     "check_choice",
     "check_count",
     "check_finite_tree",
@@ -259,15 +260,27 @@ def with_batching_rule(fun, rule):
     return run
 
 
-def batch_skipping_cond(pred, true_fn, false_fn, operands):
+#: Backends on which ``batch_skipping_cond`` runs the branch member by member under ``vmap``
+#: (``sequential=None``). On CPU the vectorised branch of ``jmse_jax._ridges`` measured
+#: about three times the cost of one member's branch per member (its gathers and scatters
+#: gain nothing from the batch), and a loop skips the members that do not take it.
+SEQUENTIAL_BRANCH_BACKENDS = ("cpu",)
+
+
+def batch_skipping_cond(pred, true_fn, false_fn, operands, *, sequential=None):
     """``lax.cond(pred, true_fn, false_fn, operands)`` that still skips ``true_fn`` under
     ``vmap``.
 
     ``vmap`` of a ``lax.cond`` whose predicate is batched evaluates both branches for every
-    member of the batch and selects. Here the batch runs ``true_fn`` (vectorised) only when
-    the predicate holds for some member, inside a ``lax.cond`` on that (unbatched) fact, and
-    each member gets its own branch's result, exactly as alone. For a ``true_fn`` that is
-    costly and rarely needed (the closed-form peaks of ``jmse_jax._ridges``).
+    member of the batch and selects. Here the batch runs ``true_fn`` only when the
+    predicate holds for some member, inside a ``lax.cond`` on that (unbatched) fact, and
+    each member gets its own branch's result, exactly as alone. Then, with ``sequential``,
+    the members go through the plain ``lax.cond`` one at a time (``lax.map``), so that only
+    those that take ``true_fn`` run it; without, ``true_fn`` runs vectorised over the whole
+    batch and each member's result is selected. ``sequential=None`` picks the loop on the
+    backends of ``SEQUENTIAL_BRANCH_BACKENDS`` (the default backend's, at trace time). For a
+    ``true_fn`` that is costly and rarely needed (the closed-form peaks of
+    ``jmse_jax._ridges``).
 
     The branches must close over no traced value (``operands`` carry every array they
     use): the batching rule (``custom_vmap``) may run after the trace that made such a
@@ -277,6 +290,8 @@ def batch_skipping_cond(pred, true_fn, false_fn, operands):
     is only evaluated inside a derivative rule (as ``jmse_jax._merit._fine_stage_jvp``
     evaluates the peaks' adjoint) keeps the skip.
     """
+    if sequential is None:
+        sequential = jax.default_backend() in SEQUENTIAL_BRANCH_BACKENDS
 
     def plain(pred, operands):
         return jax.lax.cond(pred, true_fn, false_fn, operands)
@@ -284,14 +299,19 @@ def batch_skipping_cond(pred, true_fn, false_fn, operands):
     def rule(axis_size, in_batched, pred, operands):
         operands = spread_batch(axis_size, operands, in_batched[1])
         on, off = jax.vmap(true_fn), jax.vmap(false_fn)
-        if in_batched[0]:
+        if not in_batched[0]:
+            out = jax.lax.cond(pred, on, off, operands)
+        elif sequential:
+            def each(ops):
+                return jax.lax.map(lambda member: plain(*member), (pred, ops))
+
+            out = jax.lax.cond(jnp.any(pred), each, off, operands)
+        else:
             def either(ops):
                 return jax.tree_util.tree_map(functools.partial(select_batch, pred), on(ops),
                                               off(ops))
 
             out = jax.lax.cond(jnp.any(pred), either, off, operands)
-        else:
-            out = jax.lax.cond(pred, on, off, operands)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return with_batching_rule(plain, rule)(pred, operands)

@@ -39,13 +39,15 @@ The compile counts too: each grid with the peaks adds about 1.1 s to the compile
 program that holds it and 2.7 s with a gradient, so that the default's four tier grids
 with them took the Fig. 1 point's compile from 13 to 19 s (value) and from 29 to 40 s
 (``value_and_grad``), one core. Under ``vmap`` a plain ``lax.cond`` becomes a select,
-so the cond is ``batch_skipping_cond``: the closed forms run, vectorised, for a block of the
-whole batch when one of its designs has a narrow minimum there, and not at all otherwise.
-On 32 random designs (coefficients within +-3 waves, u = 0.3, noise 1e-4) about half have
-such minima and every block needs them, so ``value_and_grad`` still takes twice the time
-per design (``fast``: 22.6 against 10.7 ms, one core); where no design has them (+-0.7
-waves, noise 1e-3) it is back to the time without the peaks (11.6 against 10.9 ms; 22.9
-with the plain cond). The peaks are therefore the option ``peaks`` of ``jmse``, on in the
+so the cond is ``batch_skipping_cond``: nothing runs for a block of the batch where no design
+has a narrow minimum, and otherwise, on CPU, the designs go through the plain cond one by one
+(vectorised over the batch the branch cost per design about three times a single design's
+branch). ``benchmarks/vmap_peaks.py``, 32 random designs, u = 0.3, ``fast``, one core,
+``value_and_grad`` per design: coefficients within +-3 waves and noise 1e-4 (15 of them
+have narrow minima) 15.8 ms against 10.9 without the peaks (24.8 vectorised); within
++-0.7 waves and noise 1e-3 (none has) 11.0 against 10.7. A loop of single calls costs 8.7
+and 4.3 ms per design on the first set.
+The peaks are therefore the option ``peaks`` of ``jmse``, on in the
 ``"high"`` preset only; the shortcuts' first and check grids never take them
 (``_merit._tier_plans``).
 """

@@ -216,12 +216,13 @@ def _counting_branches(calls):
     return costly, cheap
 
 
-def test_batch_skipping_cond_skips_the_branch_no_member_takes():
+@pytest.mark.parametrize("sequential", [True, False])
+def test_batch_skipping_cond_skips_the_branch_no_member_takes(sequential):
     calls = []
     costly, cheap = _counting_branches(calls)
 
     def skipping(x):
-        return nm.batch_skipping_cond(x > 1.0, costly, cheap, x)
+        return nm.batch_skipping_cond(x > 1.0, costly, cheap, x, sequential=sequential)
 
     def plain(x):
         return jax.lax.cond(x > 1.0, costly, cheap, x)
@@ -232,6 +233,11 @@ def test_batch_skipping_cond_skips_the_branch_no_member_takes():
         calls.clear()
         jax.block_until_ready(jax.jit(jax.vmap(fn))(none))
         assert (len(calls) > 0) == bool(expect_calls)  # plain cond: a select runs both
+    # Where some members take it: one member at a time, only those two run the branch
+    # (each its own callback); vectorised, it runs once for the whole batch.
+    calls.clear()
+    jax.block_until_ready(jax.jit(jax.vmap(skipping))(some))
+    assert len(calls) == (2 if sequential else 1)
     # Each member gets its own branch's result, bit for bit as alone, in either batch and
     # with an unbatched predicate (the operands batched or not).
     for xs in (none, some):
@@ -240,14 +246,29 @@ def test_batch_skipping_cond_skips_the_branch_no_member_takes():
         for i in range(len(xs)):
             assert float(out[0][i]) == float(alone[i][0])
             assert float(out[1][i]) == float(alone[i][1])
-    flag = jax.vmap(lambda x: nm.batch_skipping_cond(True, costly, cheap, x))(some)
+    flag = jax.vmap(lambda x: nm.batch_skipping_cond(True, costly, cheap, x,
+                                                     sequential=sequential))(some)
     np.testing.assert_array_equal(flag[0], jnp.sin(some) * some)
-    flag = jax.vmap(lambda p: nm.batch_skipping_cond(p, costly, cheap, jnp.float64(2.0)))(
+    flag = jax.vmap(lambda p: nm.batch_skipping_cond(p, costly, cheap, jnp.float64(2.0),
+                                                     sequential=sequential))(
         jnp.array([True, False]))
     np.testing.assert_array_equal(flag[0], [jnp.sin(2.0) * 2.0, 0.0])
 
 
-def test_batch_skipping_cond_derivatives():
+def test_batch_skipping_cond_picks_the_loop_by_backend():
+    # sequential=None: member by member on the backends listed (CPU here), where the
+    # vectorised branch measured slower.
+    calls = []
+    costly, cheap = _counting_branches(calls)
+    some = jnp.array([0.1, 1.5, 0.9, 2.5])
+    jax.block_until_ready(jax.jit(jax.vmap(
+        lambda x: nm.batch_skipping_cond(x > 1.0, costly, cheap, x)))(some))
+    expected = 2 if jax.default_backend() in nm.SEQUENTIAL_BRANCH_BACKENDS else 1
+    assert len(calls) == expected
+
+
+@pytest.mark.parametrize("sequential", [True, False])
+def test_batch_skipping_cond_derivatives(sequential):
     # Forward and reverse mode, and vmap of them, as those of lax.cond (the branch taken).
     _, cheap = _counting_branches([])
 
@@ -255,7 +276,7 @@ def test_batch_skipping_cond_derivatives():
         return jnp.sin(x) * x, x * x
 
     def fn(x):
-        value, other = nm.batch_skipping_cond(x > 1.0, costly, cheap, x)
+        value, other = nm.batch_skipping_cond(x > 1.0, costly, cheap, x, sequential=sequential)
         return value + 0.5 * other
 
     def exact(x):
