@@ -44,9 +44,9 @@ has a narrow minimum, and otherwise, on CPU, the designs go through the plain co
 (vectorised over the batch the branch cost per design about three times a single design's
 branch). ``benchmarks/vmap_peaks.py``, 32 random designs, u = 0.3, ``fast``, one core,
 ``value_and_grad`` per design: coefficients within +-3 waves and noise 1e-4 (15 of them
-have narrow minima) 15.8 ms against 10.9 without the peaks (24.8 vectorised); within
-+-0.7 waves and noise 1e-3 (none has) 11.0 against 10.7. A loop of single calls costs 8.7
-and 4.3 ms per design on the first set.
+have narrow minima) 15.7 ms against 10.7 without the peaks (24.7 vectorised); within
++-0.7 waves and noise 1e-3 (none has) 11.2 against 10.9. A loop of single calls costs 8.3
+and 4.1 ms per design on the first set.
 The peaks are therefore the option ``peaks`` of ``jmse``, on in the
 ``"high"`` preset only; the shortcuts' first and check grids never take them
 (``_merit._tier_plans``).
