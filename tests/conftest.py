@@ -53,3 +53,14 @@ def fig1():
     """The paper's Fig. 1 point: (aberrations, field, u, signal, noise)."""
     return (jj.Seidel(**FIG1_COEFFICIENTS), 0.95, 0.2, jj.MarkovSignal(1.0, 5.0),
             jj.WhiteNoise(1e-3))
+
+
+@pytest.fixture
+def vectorised_vmap(monkeypatch):
+    """``vmap`` of ``jmse`` vectorised over the batch, as on a GPU, instead of design by
+    design as on CPU (``jmse_jax._merit.SEQUENTIAL_VMAP_BACKENDS``): for the tests of the
+    batching rules (tiers' dispatch, peaks) that only the vectorised form consults. Read
+    when ``jmse`` is traced, so the function under test must be traced inside the test."""
+    import jmse_jax._merit as merit
+
+    monkeypatch.setattr(merit, "SEQUENTIAL_VMAP_BACKENDS", ())

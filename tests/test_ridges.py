@@ -183,9 +183,10 @@ def test_peaks_option_reaches_the_grid_the_default_routes_to():
         jj.jmse(ab, field, u, signal, noise, peaks="yes")
 
 
-def test_peaks_under_vmap_match_each_design_alone():
-    """A batch (``vmap``) gives each design what it gets alone, with the peaks' closed forms
-    run for the batch where one of its designs needs them (``batch_skipping_cond``)."""
+def test_peaks_under_vmap_match_each_design_alone(vectorised_vmap):
+    """A batch (``vmap``, vectorised as on a GPU) gives each design what it gets alone, with
+    the peaks' closed forms run where one of its designs needs them
+    (``batch_skipping_cond``; on CPU one design at a time)."""
     ab, field, u = NEAR_AXIS
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
     mild = jj.Seidel(w020=0.4, w222=0.2)

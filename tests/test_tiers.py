@@ -299,7 +299,7 @@ def test_default_gradient_matches_finite_differences_in_the_top_tier():
     assert float(grad) == pytest.approx((f[0] - f[1]) / (2 * h), rel=1e-6)
 
 
-def test_vmap_over_designs_in_different_tiers():
+def test_vmap_over_designs_in_different_tiers(vectorised_vmap):
     abs_ = [d[0] for d in DESIGNS]
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack([jnp.asarray(v, jnp.float64) for v in x]),
                                    *[jj.Seidel(**_coefficients(a)) for a in abs_])
@@ -378,8 +378,9 @@ def test_float32_design_with_float64_spectra_differentiates(monkeypatch):
                                    rtol=1e-4, atol=1e-5 * float(expected))
 
 
-def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch):
-    """Under vmap (value_and_grad) every design gets its own tier's grid, in a batch
+def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch, vectorised_vmap):
+    """Under vmap (value_and_grad, vectorised as on a GPU: the dispatch's batching rule)
+    every design gets its own tier's grid, in a batch
     that mixes tiers, holds one design that keeps the shortcut's trial and one that refuses
     it, and leaves one tier unused (the batching rule skips tiers and grids no design needs).
     Three designs on the axis take the one-ray plans of both groups of tiers
@@ -417,6 +418,68 @@ def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch):
     # The value-only rule is checked with the real tiers above
     # (test_vmap_over_designs_in_different_tiers).
     assert_vmap_matches_singles(merit, [(ab, f) for ab, f, _, _ in designs] + on_axis)
+
+
+def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
+    """On CPU ``vmap`` of ``jmse`` and of its derivatives runs the designs one at a time
+    (``SEQUENTIAL_VMAP_BACKENDS``): the tiers' vectorised dispatch is never reached (it
+    raises here), and every design gets bit for bit what it gets alone, for the value,
+    ``value_and_grad``, a batch over ``u`` only, ``jacfwd`` and the Hessian (against
+    central differences of the gradient)."""
+    from jmse_jax import _merit
+
+    assert jax.default_backend() in _merit.SEQUENTIAL_VMAP_BACKENDS
+    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
+
+    def vectorised(*args):
+        raise AssertionError("the vectorised tier dispatch ran")
+
+    monkeypatch.setattr(_merit, "_batched_tier", vectorised)
+    designs = [DESIGNS[0], DESIGNS[1], DEFOCUS_M6]
+    batch = jax.tree_util.tree_map(lambda *x: jnp.stack([jnp.asarray(v, jnp.float64) for v in x]),
+                                   *[jj.Seidel(**_coefficients(d[0])) for d in designs])
+    fields = jnp.asarray([d[1] for d in designs])
+
+    def merit(a, f, u=0.2):
+        return jj.jmse(a, f, u, SIGNAL, NOISE)
+
+    vag = jax.value_and_grad(merit, argnums=(0, 1))
+    values = jax.jit(jax.vmap(merit))(batch, fields)
+    values_g, (grads, field_grads) = jax.jit(jax.vmap(vag))(batch, fields)
+    single, single_vag = jax.jit(merit), jax.jit(vag)
+    for i, (ab, f, _, _) in enumerate(designs):
+        ab = jj.Seidel(**_coefficients(ab))
+        value, (grad, field_grad) = single_vag(ab, jnp.float64(f))
+        assert float(values[i]) == float(single(ab, jnp.float64(f))) == float(value)
+        assert float(values_g[i]) == float(value)
+        assert float(field_grads[i]) == float(field_grad)
+        for name in ("w020", "w040", "w131", "w222", "w220"):
+            assert float(getattr(grads, name)[i]) == float(getattr(grad, name))
+    # A batch over u alone (the design and field broadcast to it).
+    ab, f = jj.Seidel(**_coefficients(DESIGNS[1][0])), jnp.float64(DESIGNS[1][1])
+    us = jnp.asarray([0.15, 0.2, 0.3])
+    over_u = jax.jit(jax.vmap(lambda u: merit(ab, f, u)))(us)
+    for i, u in enumerate(us):
+        assert float(over_u[i]) == float(jax.jit(merit)(ab, f, u))
+    # Forward mode and second derivatives, in the coefficient vector.
+    c0 = jnp.asarray([getattr(ab, k) for k in ("w020", "w040", "w131", "w222", "w220")])
+
+    def of_vector(c):
+        return merit(jj.Seidel(**dict(zip(("w020", "w040", "w131", "w222", "w220"), c,
+                                          strict=True))), f)
+
+    gradient = jax.jit(jax.grad(of_vector))
+    np.testing.assert_allclose(jax.jit(jax.jacfwd(of_vector))(c0), gradient(c0), rtol=1e-12)
+    hessian = jax.jit(jax.hessian(of_vector))(c0)
+    h = 1e-5
+    for k in (0, 2):
+        step = jnp.zeros(5).at[k].set(h)
+        column = (gradient(c0 + step) - gradient(c0 - step)) / (2 * h)
+        np.testing.assert_allclose(hessian[:, k], column, rtol=1e-5,
+                                   atol=1e-6 * float(jnp.max(jnp.abs(hessian))))
+    batched = jax.jit(jax.vmap(jax.hessian(of_vector)))(jnp.stack([c0, 0.5 * c0]))
+    np.testing.assert_allclose(batched[0], hessian, rtol=1e-12,
+                               atol=1e-14 * float(jnp.max(jnp.abs(hessian))))
 
 
 @pytest.mark.parametrize("first_tol, kept", [(None, "trial"), (math.inf, "first"),
