@@ -209,7 +209,7 @@ _PRESET_ONLY = ("tiers", "radial")
 #: off too. ``peaks``: the polar grids' fine stage integrates the narrow peaks of ``S_e``
 #: at the minima of ``|H|^2`` along its rays in closed form (``jmse_jax._ridges``); on in
 #: ``"high"`` only, as it costs every program that holds a grid about 1.5 s of compile
-#: (3 s with a gradient) and a batch under ``vmap`` runs it for every design.
+#: (3 s with a gradient) and doubles the time of a design that has such peaks.
 PRESETS: dict[str, dict] = {
     # 16 overlap nodes along the chords (20 until 2026-11-25): the same worst error on the
     # bank (3.1e-2) and on 40 random designs of the paper's singlet space against ``high``
@@ -1267,7 +1267,9 @@ def jmse(
         of their own. Under ``vmap`` a tier runs, for the whole batch, only
         if one of the batch's designs selects it (and a tier's own grid only if one refuses
         its shortcut), so a batch of similar designs costs one tier; each design gets
-        what it gets alone. The value can jump, within the tolerance, where a
+        what it gets alone. (That is the vectorised ``vmap`` of GPUs; on CPU ``vmap``
+        runs the designs one at a time, ``SEQUENTIAL_VMAP_BACKENDS``, which costs a
+        loop's time.) The value can jump, within the tolerance, where a
         design crosses a tier bound or the shortcut's threshold; an optimiser wants a fixed
         grid (``"fast"``, ``optimise``'s default). Every preset integrates a rotationally
         symmetric design (any design on the axis; ``radially_symmetric``) with isotropic
@@ -1305,7 +1307,7 @@ def jmse(
         fine grid whose peak of ``S_e`` is too narrow for the fine nodes (designs near the
         axis at high SNR), integrate that peak in closed form (``jmse_jax._ridges``). On in
         the ``"high"`` preset; off in ``"fast"`` and ``"default"``, where it would add about
-        40 % to the compile time and, under ``vmap``, run for every design of a batch. Not
+        40 % to the compile time and double the time of a design that has such peaks. Not
         a grid option: ``peaks=True`` keeps the default's tiers (their own grids take it,
         the shortcuts' first and check grids do not).
 
@@ -1378,11 +1380,20 @@ def _traced_entry(static, inputs):
 
 def _one_at_a_time(fn):
     """``fn`` (positional arguments) whose ``vmap`` runs the members one by one
-    (``lax.map``; unbatched arguments are broadcast first)."""
+    (``lax.map`` over the batched leaves; the others are shared by every member, so that a
+    constant stays one: the members get bit for bit what they get alone)."""
 
     def rule(axis_size, in_batched, *args):
-        args = spread_batch(axis_size, tuple(args), in_batched)
-        out = jax.lax.map(lambda member: fn(*member), args)
+        leaves, treedef = jax.tree_util.tree_flatten(args)
+        flags = jax.tree_util.tree_leaves(in_batched)
+
+        def member(batched):
+            it = iter(batched)
+            full = [next(it) if flag else leaf for leaf, flag in zip(leaves, flags, strict=True)]
+            return fn(*jax.tree_util.tree_unflatten(treedef, full))
+
+        out = jax.lax.map(member, [leaf for leaf, flag in zip(leaves, flags, strict=True)
+                                   if flag])
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return with_batching_rule(fn, rule)
