@@ -38,15 +38,17 @@ defocus with 0.5 of astigmatism at field 0.1 and noise 1e-4 took ``value_and_gra
 The compile counts too: each grid with the peaks adds about 1.1 s to the compile of a
 program that holds it and 2.7 s with a gradient, so that the default's four tier grids
 with them took the Fig. 1 point's compile from 13 to 19 s (value) and from 29 to 40 s
-(``value_and_grad``), one core. Under ``vmap`` a plain ``lax.cond`` becomes a select,
-so the cond is ``batch_skipping_cond``: nothing runs for a block of the batch where no design
-has a narrow minimum, and otherwise, on CPU, the designs go through the plain cond one by one
-(vectorised over the batch the branch cost per design about three times a single design's
-branch). ``benchmarks/vmap_peaks.py``, 32 random designs, u = 0.3, ``fast``, one core,
-``value_and_grad`` per design: coefficients within +-3 waves and noise 1e-4 (15 of them
-have narrow minima) 15.7 ms against 10.7 without the peaks (24.7 vectorised); within
-+-0.7 waves and noise 1e-3 (none has) 11.2 against 10.9. A loop of single calls costs 8.3
-and 4.1 ms per design on the first set.
+(``value_and_grad``), one core. On CPU ``vmap`` of ``jmse`` runs the designs one at a
+time (``_merit.SEQUENTIAL_VMAP_BACKENDS``), so the cond skips the branch for each design
+that has no narrow minimum; on 32 random designs within +-3 waves, noise 1e-4, u = 0.3
+(15 of them have narrow minima), ``fast``'s ``value_and_grad`` takes 7.1 ms per design
+against 3.8 without the peaks (``benchmarks/vmap_batches.py``, one core). Vectorised over
+a batch, as on a GPU, a plain ``lax.cond`` would become a select, so the cond is
+``batch_skipping_cond``: nothing runs for a block of the batch where no design has a narrow
+minimum, and otherwise the branch runs vectorised (or, on the backends of
+``_numerics.SEQUENTIAL_BRANCH_BACKENDS``, design by design: on CPU the vectorised branch
+cost about three times a single design's per design; 25.1 against 15.3 ms per design on
+the designs above, 11.3 without the peaks).
 The peaks are therefore the option ``peaks`` of ``jmse``, on in the
 ``"high"`` preset only; the shortcuts' first and check grids never take them
 (``_merit._tier_plans``).
