@@ -434,9 +434,11 @@ def sweep(
         Traceable predicate; designs for which it is False get ``SweepStatus.INVALID``.
     batch_size : int >= 1, optional
         Designs evaluated together (one ``vmap``) on each device. Default: 1 on CPU, where
-        ``jmse`` is fastest one design at a time (a ``vmap`` of many designs multiplies
-        its working set past the caches: 2-3x slower per design, measured in
-        ``benchmarks/sweep_bench.py``), and ``DEFAULT_ACCELERATOR_BATCH`` on GPU/TPU.
+        ``jmse`` is fastest one design at a time (a vectorised ``vmap`` of many designs
+        multiplies its working set past the caches: 2-3x slower per design, measured in
+        ``benchmarks/sweep_bench.py``; ``jmse`` under ``vmap`` on CPU now runs its designs
+        one at a time anyway, ``_merit.SEQUENTIAL_VMAP_BACKENDS``, but the rest of ``fn``
+        would be vectorised), and ``DEFAULT_ACCELERATOR_BATCH`` on GPU/TPU.
         With ``batch_size=1`` the designs go through ``lax.map`` without ``vmap``, so
         data-dependent branches (``lax.cond``) stay branches. Memory per device is
         about ``batch_size`` times the memory of one design in flight, which
