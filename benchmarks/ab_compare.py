@@ -44,7 +44,7 @@ def _parse_args(argv=None):
     parser.add_argument("checkouts", nargs="+", help="directories that hold a jmse_jax package")
     parser.add_argument("--problem", default="fig1", help="bank problem (tests/problems.py)")
     parser.add_argument("--presets", default="fast,default", help="comma separated")
-    parser.add_argument("--modes", default="value,vag", help="value and/or vag")
+    parser.add_argument("--modes", default="value,vag", help="value, vag and/or jvp")
     parser.add_argument("--rounds", type=int, default=7, help="alternation rounds")
     parser.add_argument("--calls", type=int, default=5, help="calls per version per round")
     parser.add_argument("--options", default="{}",
@@ -96,7 +96,15 @@ def main(argv=None):
                 def merit(w, operands=operands, preset=preset, module=module):
                     return module.jmse(w, *operands[1:], preset=preset, **options)
 
-                fn = jax.jit(merit if mode == "value" else jax.value_and_grad(merit))
+                if mode == "value":
+                    fn = jax.jit(merit)
+                elif mode == "vag":
+                    fn = jax.jit(jax.value_and_grad(merit))
+                elif mode == "jvp":  # forward mode, all coefficients' tangents 1
+                    fn = jax.jit(lambda w, merit=merit: jax.jvp(
+                        merit, (w,), (jax.tree_util.tree_map(jnp.ones_like, w),)))
+                else:
+                    raise SystemExit(f"unknown mode {mode!r}: value, vag or jvp")
                 out = jax.block_until_ready(fn(operands[0]))
                 value = float(out if mode == "value" else out[0])
                 calls[i, preset, mode] = (fn, operands[0], value)

@@ -1399,9 +1399,14 @@ def _one_at_a_time(fn):
     return with_batching_rule(fn, rule)
 
 
+@functools.partial(jax.jit, static_argnums=0)
 def _sequential_merit(static, inputs):
     """``_traced_merit(static, inputs)`` whose ``vmap`` runs design by design, for the value
     and for first derivatives alike.
+
+    Jitted, as ``_traced_merit`` is: a transformation applied without ``jit`` then traces
+    the wrappers once and reuses the program (an eager ``jax.grad`` of the Fig. 1 point
+    took 7.5 ms per call with them traced anew each call, against 3.1 ms before them).
 
     A batching rule alone (``custom_vmap``) is not consulted under differentiation, so the
     derivative rule forms the value and the gradient in the leaves that carry a tangent
