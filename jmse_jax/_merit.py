@@ -26,6 +26,7 @@ from ._numerics import (
     check_range,
     common_dtype,
     is_concrete,
+    one_at_a_time,
     select_batch,
     spread_batch,
     with_batching_rule,
@@ -1378,27 +1379,6 @@ def _traced_entry(static, inputs):
     return _sequential_merit(static, inputs)
 
 
-def _one_at_a_time(fn):
-    """``fn`` (positional arguments) whose ``vmap`` runs the members one by one
-    (``lax.map`` over the batched leaves; the others are shared by every member, so that a
-    constant stays one: the members get bit for bit what they get alone)."""
-
-    def rule(axis_size, in_batched, *args):
-        leaves, treedef = jax.tree_util.tree_flatten(args)
-        flags = jax.tree_util.tree_leaves(in_batched)
-
-        def member(batched):
-            it = iter(batched)
-            full = [next(it) if flag else leaf for leaf, flag in zip(leaves, flags, strict=True)]
-            return fn(*jax.tree_util.tree_unflatten(treedef, full))
-
-        out = jax.lax.map(member, [leaf for leaf, flag in zip(leaves, flags, strict=True)
-                                   if flag])
-        return out, jax.tree_util.tree_map(lambda _: True, out)
-
-    return with_batching_rule(fn, rule)
-
-
 @functools.partial(jax.jit, static_argnums=0)
 def _sequential_merit(static, inputs):
     """``_traced_merit(static, inputs)`` whose ``vmap`` runs design by design, for the value
@@ -1419,12 +1399,12 @@ def _sequential_merit(static, inputs):
 
     @jax.custom_jvp
     def call(inputs):
-        return _one_at_a_time(merit)(inputs)
+        return one_at_a_time(merit)(inputs)
 
     def call_jvp(primals, tangents):
         (inputs,), (d_inputs,) = primals, tangents
         wrt, live = _live_tangents(d_inputs)
-        value, gradient = _one_at_a_time(_value_and_grad(merit, wrt))(inputs)
+        value, gradient = one_at_a_time(_value_and_grad(merit, wrt))(inputs)
         return value, _tangent(value, gradient, live)
 
     call.defjvp(call_jvp, symbolic_zeros=True)

@@ -18,11 +18,11 @@ import numpy as np
 
 __all__ = [
     "EXACT",
+    "SEQUENTIAL_BRANCH_BACKENDS",
     "abs2",
     "all_finite",
     "barycentric_matrix",
     "batch_skipping_cond",
-    "SEQUENTIAL_BRANCH_BACKENDS",
     "check_choice",
     "check_count",
     "check_finite_tree",
@@ -33,7 +33,9 @@ __all__ = [
     "gauss_legendre",
     "is_concrete",
     "is_single_precision",
+    "map_batch",
     "materialise",
+    "one_at_a_time",
     "runtime_one",
     "safe_arccos",
     "safe_norm",
@@ -260,6 +262,32 @@ def with_batching_rule(fun, rule):
     return run
 
 
+def map_batch(fn, in_batched, args):
+    """``lax.map`` of ``fn(*args)`` over the leading axis of the leaves of ``args`` marked in
+    ``in_batched`` (a ``custom_vmap`` rule's); the other leaves are shared by every member,
+    so that a constant stays one and each member gets bit for bit what it gets alone."""
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    flags = jax.tree_util.tree_leaves(in_batched)
+
+    def member(batched):
+        it = iter(batched)
+        full = [next(it) if flag else leaf for leaf, flag in zip(leaves, flags, strict=True)]
+        return fn(*jax.tree_util.tree_unflatten(treedef, full))
+
+    return jax.lax.map(member, [leaf for leaf, flag in zip(leaves, flags, strict=True) if flag])
+
+
+def one_at_a_time(fn):
+    """``fn`` (positional arguments) whose ``vmap`` runs the members one by one
+    (``map_batch``); derivatives as ``with_batching_rule``'s."""
+
+    def rule(axis_size, in_batched, *args):
+        out = map_batch(fn, in_batched, args)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return with_batching_rule(fn, rule)
+
+
 #: Backends on which ``batch_skipping_cond`` runs the branch member by member under ``vmap``
 #: (``sequential=None``). On CPU the vectorised branch of ``jmse_jax._ridges`` measured
 #: about three times the cost of one member's branch per member (its gathers and scatters
@@ -297,21 +325,21 @@ def batch_skipping_cond(pred, true_fn, false_fn, operands, *, sequential=None):
         return jax.lax.cond(pred, true_fn, false_fn, operands)
 
     def rule(axis_size, in_batched, pred, operands):
-        operands = spread_batch(axis_size, operands, in_batched[1])
+        spread = spread_batch(axis_size, operands, in_batched[1])
         on, off = jax.vmap(true_fn), jax.vmap(false_fn)
         if not in_batched[0]:
-            out = jax.lax.cond(pred, on, off, operands)
+            out = jax.lax.cond(pred, on, off, spread)
         elif sequential:
-            def each(ops):
-                return jax.lax.map(lambda member: plain(*member), (pred, ops))
+            def each(_):
+                return map_batch(plain, in_batched, (pred, operands))
 
-            out = jax.lax.cond(jnp.any(pred), each, off, operands)
+            out = jax.lax.cond(jnp.any(pred), each, off, spread)
         else:
             def either(ops):
                 return jax.tree_util.tree_map(functools.partial(select_batch, pred), on(ops),
                                               off(ops))
 
-            out = jax.lax.cond(jnp.any(pred), either, off, operands)
+            out = jax.lax.cond(jnp.any(pred), either, off, spread)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return with_batching_rule(plain, rule)(pred, operands)
