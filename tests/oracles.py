@@ -156,3 +156,15 @@ def square_integral(f, u: float, tol: float = 1e-12) -> float:
     ``scipy.integrate.dblquad`` over the first quadrant (times 4)."""
     value, _ = integrate.dblquad(lambda y, x: f(x, y), 0.0, u, 0.0, u, epsabs=tol, epsrel=tol)
     return 4.0 * value
+
+
+def markov_no_transfer_jmse(u: float, variance: float, correlation_length: float) -> float:
+    """``(1 / 2 pi) ∫∫_{[-u, u]²} S_x`` for the Markov spectrum in closed form: the JMSE with
+    no transfer at all (``H = 0``, so ``S_e = S_x``), an upper bound of every lens's.
+
+    With ``c = 1 / (2 pi mu)``, ``S_x = (variance mu / k²) (c² + r²)^(-3/2)`` (``k = 2 pi mu``)
+    and ``∫_0^X ∫_0^Y (c² + x² + y²)^(-3/2) = arctan(X Y / (c sqrt(c² + X² + Y²))) / c``
+    (the solid angle of a rectangle)."""
+    c = 1.0 / (2.0 * np.pi * correlation_length)
+    angle = np.arctan(u * u / (c * np.sqrt(c * c + 2.0 * u * u)))
+    return float(4.0 * variance / (2.0 * np.pi) * angle / (2.0 * np.pi))

@@ -96,6 +96,50 @@ def test_anisotropic_signal_equals_scipy_oracle(u):
     assert abs(value / isotropic - 1) > 1e-3  # the anisotropy matters at this tolerance
 
 
+def _bounded_designs(count=16, seed=3):
+    """Random Seidel designs inside the checked range (strength <= CHECKED_STRENGTH, peak
+    SNR <= CHECKED_SNR): coefficients from 0.01 to 8 waves, distortion included, some exact
+    zeros, fields and bands (u up to 1.3, past the cutoff) across their ranges."""
+    rng = np.random.default_rng(seed)
+    designs = []
+    while len(designs) < count:
+        scale = (0.01, 0.3, 1.0, 3.0, 8.0)[len(designs) % 5]
+        c = np.where(rng.random(6) < 0.3, 0.0, rng.normal(size=6) * scale)
+        ab = jj.Seidel(**dict(zip(("w020", "w040", "w131", "w222", "w220", "w311"),
+                                  map(float, c), strict=True)))
+        field = float(rng.choice([0.0, 1.0, rng.uniform(0.0, 1.0)]))
+        u = float(rng.choice([0.1, 0.3, 0.6, 0.9, 1.3]))
+        signal = jj.MarkovSignal(float(10 ** rng.uniform(-1, 1)), float(rng.uniform(1.0, 8.0)))
+        noise = jj.WhiteNoise(float(10 ** rng.uniform(-3.5, -0.5)))
+        if (float(jj.aberration_strength(ab, field, u)) <= jj.CHECKED_STRENGTH
+                and float(signal.radial(0.0)) / noise.variance <= jj.CHECKED_SNR):
+            designs.append((ab, field, u, signal, noise))
+    return designs
+
+
+def test_jmse_lies_between_the_unaberrated_lens_and_no_transfer():
+    """|H| never exceeds the diffraction-limited OTF and S_e falls as |H| grows, so every
+    design's JMSE lies between the unaberrated lens's (checked against SciPy above) and
+    the closed-form (1/2 pi) ∫∫_band S_x of no transfer at all
+    (``oracles.markov_no_transfer_jmse``); within the default's 1e-4. The draw holds designs
+    next to each bound (a weak off-axis design near the lower; 8 waves of defocus and 3 of
+    coma at low SNR on a band past the cutoff near the upper), so an |H| above the
+    diffraction-limited one or a band integral inflated by 10 % would show."""
+    near_bounds = [
+        (jj.Seidel(w222=1e-3), 1.0, 0.5, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)),
+        (jj.Seidel(w020=8.0, w131=3.0), 0.7, 1.3, jj.MarkovSignal(1.0, 2.0), jj.WhiteNoise(0.3)),
+    ]
+    low_gaps, high_gaps = [], []
+    for ab, field, u, signal, noise in _bounded_designs() + near_bounds:
+        value = float(jmse_fn()(ab, field, u, signal, noise))
+        lower = float(jmse_fn()(jj.Seidel(), field, u, signal, noise))
+        upper = oracles.markov_no_transfer_jmse(u, signal.variance, signal.correlation_length)
+        assert lower * (1 - 1e-4) <= value <= upper * (1 + 1e-4), (ab, field, u)
+        low_gaps.append(value / lower - 1)
+        high_gaps.append(1 - value / upper)
+    assert min(low_gaps) < 1e-4 and min(high_gaps) < 0.1
+
+
 @pytest.mark.parametrize("problem", CONVERGED, ids=lambda p: p.name)
 def test_default_matches_bank_reference(problem):
     value = float(jmse_fn()(*problem.arguments()))

@@ -1,0 +1,205 @@
+"""Random extreme designs: finite values and gradients, and the JMSE between its two bounds.
+
+Every JMSE lies between two bounds that hold for any wavefront. The modulus of an aberrated
+OTF never exceeds the diffraction-limited one (Cauchy-Schwarz on the overlap integral),
+and ``S_e = S_x S_n / (|H|^2 S_x + S_n)`` falls as ``|H|`` grows, so
+
+    jmse(no aberration)  <=  jmse(design)  <=  (1 / 2 pi) iint_band S_x
+
+(the right-hand side is the error with no transfer at all). For ``MarkovSignal(v, mu)`` the
+upper bound has a closed form over the square band ``|nu_x|, |nu_y| < u`` (the solid angle of
+a rectangle): ``(1 / 2 pi) (2 v / pi) arctan(u^2 / (c sqrt(c^2 + 2 u^2)))`` with
+``c = 1 / (2 pi mu)``. The lower bound is the package's own value for the unaberrated lens,
+which ``tests/test_merit.py`` checks against a SciPy oracle.
+
+The designs are drawn to be hard: all six Seidel coefficients (distortion included) at
+scales from 0 to 20 waves, with random exact zeros (symmetric designs, which take the
+one-ray plans); fields at 0, 1 and next to them; ``u`` from 1e-3 to 1.5 with the values
+where the rules change (``1/sqrt(2)``, 1); noise variances 1e-8 to 1 (peak SNR up to
+~1e10, beyond ``CHECKED_SNR``); signal variances 1e-2 to 1e2 and correlation lengths 0.1 to
+100. For each, ``jax.value_and_grad`` of the JMSE with respect to every argument (the six
+coefficients, field, u, noise variance, signal variance and correlation length) is
+evaluated under ``jit``, and the script counts results that are not finite, values outside
+the bounds beyond a tolerance (the preset's documented worst error within the checked
+range, looser beyond it), and values that are not positive.
+
+Usage (from the repository root; about 4 min on 2 cores with the defaults)::
+
+    .venv/bin/python benchmarks/bounds_fuzz.py [--designs 150] [--seed 11]
+        [--presets fast,default,high] [--dtypes float64,float32]
+
+Writes ``benchmarks/results/bounds_fuzz.json`` and ``.md`` (``--tag`` adds a suffix).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+import _common as common
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+jax.config.update("jax_enable_x64", True)
+
+import jmse_jax as jj  # noqa: E402
+
+NAMES = ("w020", "w040", "w131", "w222", "w220", "w311")
+SCALES = (0.0, 1e-3, 0.1, 1.0, 3.0, 8.0, 20.0)
+#: Relative tolerance on the bounds within the checked range (strength <= CHECKED_STRENGTH,
+#: peak SNR <= CHECKED_SNR): above each preset's worst error on the bank and the tiers'
+#: calibrations (README). Beyond it the grids are not checked and only 10 % is asked.
+TOLERANCE = {"fast": 5e-2, "default": 1e-4, "high": 1e-5}
+UNCHECKED_TOLERANCE = 0.1
+#: float32 adds its own rounding: about 1e-5 relative on the presets (README).
+FLOAT32_EXTRA = 1e-4
+#: The ``high`` preset costs ~40 ms a design; it gets this share of the designs.
+HIGH_SHARE = 3
+
+
+def markov_upper_bound(u, variance, correlation_length):
+    """``(1 / 2 pi) iint_{|nu_x|, |nu_y| < u} S_x`` for ``MarkovSignal``, in closed form."""
+    c = 1.0 / (2.0 * math.pi * correlation_length)
+    angle = np.arctan(u * u / (c * np.sqrt(c * c + 2.0 * u * u)))
+    return (2.0 * variance / math.pi) * angle / (2.0 * math.pi)
+
+
+def draw(rng) -> dict:
+    """One hard design (see the module docstring)."""
+    scale = SCALES[rng.integers(len(SCALES))]
+    c = rng.normal(size=len(NAMES)) * scale
+    c = np.where(rng.random(len(NAMES)) < 0.4, 0.0, c)
+    field = float(rng.choice([0.0, 1.0, 1e-9, 1.0 - 1e-9, rng.random(), rng.random()]))
+    u = float(rng.choice([1e-3, 0.05, 1.0 / math.sqrt(2.0), 0.7071, 0.7072, 1.0, 1.5,
+                          rng.uniform(0.05, 1.5), rng.uniform(0.05, 1.5)]))
+    return dict(coefficients=c.tolist(), field=field, u=u,
+                noise=float(10 ** rng.uniform(-8, 0)),
+                signal_variance=float(10 ** rng.uniform(-2, 2)),
+                correlation_length=float(10 ** rng.uniform(-1, 2)))
+
+
+def _programs(preset: str, dtype):
+    def merit(c, field, u, noise, variance, length):
+        ab = jj.Seidel(**{name: c[i] for i, name in enumerate(NAMES)})
+        return jj.jmse(ab, field, u, jj.MarkovSignal(variance, length), jj.WhiteNoise(noise),
+                       preset=preset)
+
+    value_and_grad = jax.jit(jax.value_and_grad(merit, argnums=tuple(range(6))))
+    unaberrated = jax.jit(lambda *a: merit(jnp.zeros(len(NAMES), dtype), *a))
+    return value_and_grad, unaberrated
+
+
+def run_one(preset: str, dtype, designs: list[dict]) -> dict:
+    value_and_grad, unaberrated = _programs(preset, dtype)
+    rows, start = [], time.perf_counter()
+    for d in designs:
+        scalars = [jnp.asarray(d[k], dtype) for k in
+                   ("field", "u", "noise", "signal_variance", "correlation_length")]
+        value, grads = value_and_grad(jnp.asarray(d["coefficients"], dtype), *scalars)
+        lower = float(unaberrated(*scalars))
+        upper = markov_upper_bound(d["u"], d["signal_variance"], d["correlation_length"])
+        ab = jj.Seidel(**dict(zip(NAMES, d["coefficients"], strict=True)))
+        strength = float(jj.aberration_strength(ab, d["field"], d["u"]))
+        peak_snr = jj.MarkovSignal(d["signal_variance"], d["correlation_length"]).radial(
+            0.0) / d["noise"]
+        snr_limit = jj.CHECKED_SNR_PEAKS if jj.jmse_options(preset)["peaks"] else jj.CHECKED_SNR
+        checked = strength <= jj.CHECKED_STRENGTH and float(peak_snr) <= snr_limit
+        tol = TOLERANCE[preset] if checked else UNCHECKED_TOLERANCE
+        if dtype == jnp.float32:
+            tol += FLOAT32_EXTRA
+        v = float(value)
+        finite = bool(np.isfinite(v) and all(np.all(np.isfinite(np.asarray(g))) for g in grads))
+        rows.append(dict(design=d, value=v, lower=lower, upper=upper, strength=strength,
+                         peak_snr=float(peak_snr), checked=checked, tolerance=tol,
+                         finite=finite, positive=v > 0,
+                         below_lower=(lower - v) / lower, above_upper=(v - upper) / upper))
+    seconds = time.perf_counter() - start
+    bad = [r for r in rows if not r["finite"] or not r["positive"]
+           or r["below_lower"] > r["tolerance"] or r["above_upper"] > r["tolerance"]]
+    return dict(preset=preset, dtype=jnp.dtype(dtype).name, designs=len(rows),
+                checked=sum(r["checked"] for r in rows),
+                not_finite=sum(not r["finite"] for r in rows),
+                not_positive=sum(not r["positive"] for r in rows),
+                worst_below_lower=max(r["below_lower"] for r in rows),
+                worst_above_upper=max(r["above_upper"] for r in rows),
+                checked_below_lower=max((r["below_lower"] for r in rows if r["checked"]),
+                                        default=None),
+                checked_above_upper=max((r["above_upper"] for r in rows if r["checked"]),
+                                        default=None),
+                max_strength=max(r["strength"] for r in rows),
+                max_peak_snr=max(r["peak_snr"] for r in rows),
+                failures=bad, seconds=seconds, rows=rows)
+
+
+def _fmt(x) -> str:
+    return "–" if x is None else f"{x:.1e}"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--designs", type=int, default=150)
+    parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument("--presets", default="fast,default,high")
+    parser.add_argument("--dtypes", default="float64,float32")
+    parser.add_argument("--tag", default="")
+    args = parser.parse_args(argv)
+    rng = np.random.default_rng(args.seed)
+    designs = [draw(rng) for _ in range(args.designs)]
+    runs = []
+    for preset in args.presets.split(","):
+        for name in args.dtypes.split(","):
+            subset = designs[::HIGH_SHARE] if preset == "high" else designs
+            result = run_one(preset, jnp.dtype(name).type, subset)
+            runs.append(result)
+            print(f"{preset:8s} {name}: {result['designs']} designs "
+                  f"({result['checked']} in the checked range), not finite "
+                  f"{result['not_finite']}, outside the bounds {len(result['failures'])}; "
+                  f"worst below the lower bound {result['worst_below_lower']:.1e}, above the "
+                  f"upper {result['worst_above_upper']:.1e} ({result['seconds']:.0f} s)",
+                  flush=True)
+
+    machine = common.machine_info()
+    report = dict(description=__doc__.split("\n\n")[0], machine=machine, seed=args.seed,
+                  tolerance=TOLERANCE, unchecked_tolerance=UNCHECKED_TOLERANCE,
+                  float32_extra=FLOAT32_EXTRA, runs=runs)
+    lines = [
+        "# Random extreme designs: finite results and the JMSE between its bounds", "",
+        f"{machine.get('cpu_model')}, {machine.get('cpu_count')} CPUs, jax "
+        f"{machine.get('jax_version')}, commit `{machine.get('commit')}`, {machine.get('date')}; "
+        f"`python benchmarks/bounds_fuzz.py --designs {args.designs} --seed {args.seed}` "
+        f"(`high` on every {HIGH_SHARE}rd design). `jax.value_and_grad` under `jit` in all "
+        "eleven inputs. Bounds: the unaberrated lens's JMSE below, "
+        "`(1/2 pi) iint_band S_x` (closed form) above; `below` / `above` are the largest "
+        "relative amounts by which a value passed them (negative: inside), over all designs "
+        "and over those in the checked range (strength <= `CHECKED_STRENGTH`, peak SNR <= "
+        "`CHECKED_SNR`, or `CHECKED_SNR_PEAKS` for `high`, whose grids take the closed-form "
+        "peaks). Tolerance "
+        f"{TOLERANCE} in the checked range, {UNCHECKED_TOLERANCE} beyond it, "
+        f"+{FLOAT32_EXTRA} in float32.", "",
+        "| preset | dtype | designs (checked range) | max strength | max peak SNR "
+        "| not finite | not positive | below lower: all (checked) "
+        "| above upper: all (checked) | failures | time |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in runs:
+        lines.append(
+            f"| {r['preset']} | {r['dtype']} | {r['designs']} ({r['checked']}) | "
+            f"{r['max_strength']:.0f} | {r['max_peak_snr']:.1e} | {r['not_finite']} | "
+            f"{r['not_positive']} | {r['worst_below_lower']:.1e} "
+            f"({_fmt(r['checked_below_lower'])}) | {r['worst_above_upper']:.1e} "
+            f"({_fmt(r['checked_above_upper'])}) | {len(r['failures'])} | "
+            f"{r['seconds']:.0f} s |")
+    failures = [(r["preset"], r["dtype"], f) for r in runs for f in r["failures"]]
+    if failures:
+        lines += ["", "Failures:", ""]
+        lines += [f"- {p} {t}: {f['design']} -> {f['value']:.6e} (bounds {f['lower']:.6e}, "
+                  f"{f['upper']:.6e}; finite {f['finite']})" for p, t, f in failures]
+    common.write_report("bounds_fuzz" + (f"_{args.tag}" if args.tag else ""), report, lines)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
