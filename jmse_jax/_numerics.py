@@ -359,9 +359,53 @@ def common_dtype(*args):
 # --------------------------------------------------------------------------------------
 
 
+#: Above this many nodes the Gauss–Legendre rule comes from Newton's method on the
+#: three-term recurrence (``_gauss_legendre_newton``, O(n^2) vectorised work) instead of
+#: NumPy's ``leggauss``, whose dense eigenvalue solve is O(n^3): 2.7 s at 3840 nodes and
+#: 24 s at 7680, the outer radial panel of ``se_nodes=(19200, ...)``, once per process
+#: (0.25 s by Newton). Every preset's rules are at or below it and keep ``leggauss``'s.
+NEWTON_GAUSS_ABOVE = 1024
+
+
+def _gauss_legendre_newton(n: int):
+    """Gauss–Legendre rule on [-1, 1] by Newton's method on ``P_n`` (three-term recurrence)
+    from Tricomi's approximation of the roots, weights ``2 / ((1 - x^2) P_n'(x)^2)``;
+    nodes ascending. On ``exp``, ``sqrt(1.5 - x)`` and ``1 / (1.01 - x)`` it integrates to
+    2e-16-3e-15 relative for 1100-5000 nodes (``leggauss``: 3e-15-2e-12)."""
+    m = (n + 1) // 2
+    k = np.arange(1, m + 1)
+    theta = np.pi * (4 * k - 1) / (4 * n + 2)
+    x = np.cos(theta) * (1.0 - (n - 1) / (8.0 * n**3)
+                         - (39.0 - 28.0 / np.sin(theta) ** 2) / (384.0 * n**4))
+
+    def legendre(x):  # P_n(x), P_{n-1}(x)
+        p_prev, p = np.ones_like(x), x.copy()
+        for j in range(2, n + 1):
+            p_prev, p = p, ((2 * j - 1) * x * p - (j - 1) * p_prev) / j
+        return p, p_prev
+
+    for _ in range(10):
+        p, p_prev = legendre(x)
+        step = p * (x * x - 1.0) / (n * (x * p - p_prev))
+        x = x - step
+        if np.max(np.abs(step)) <= 2e-16:
+            break
+    if n % 2:
+        x[-1] = 0.0  # the middle root, exactly
+    p, p_prev = legendre(x)
+    derivative = n * (x * p - p_prev) / (x * x - 1.0)
+    w = 2.0 / ((1.0 - x * x) * derivative * derivative)
+    # x holds the roots in (0, 1] from the largest down (and 0 last for odd n).
+    mirror = slice(None, None, -1) if n % 2 == 0 else slice(-2, None, -1)
+    return np.concatenate([-x, x[mirror]]), np.concatenate([w, w[mirror]])
+
+
 @functools.cache
 def _gauss_legendre_unit(n: int):
-    x, w = np.polynomial.legendre.leggauss(n)
+    if n > NEWTON_GAUSS_ABOVE:
+        x, w = _gauss_legendre_newton(n)
+    else:
+        x, w = np.polynomial.legendre.leggauss(n)
     x.setflags(write=False)
     w.setflags(write=False)
     return x, w

@@ -70,6 +70,28 @@ def test_gauss_legendre_exactness():
                                                       rel=1e-14)
 
 
+@pytest.mark.parametrize("n", [1, 2, 7, 8, 1025, 3001])
+def test_large_gauss_legendre_rules_by_newton(n):
+    """Rules above ``NEWTON_GAUSS_ABOVE`` nodes come from Newton's method (``leggauss`` is
+    O(n^3)); checked against ``leggauss`` and against closed-form integrals, including one
+    whose integrand is near a pole just past the end (the end weights matter)."""
+    x, w = nm._gauss_legendre_newton(n)
+    xr, wr = np.polynomial.legendre.leggauss(n)
+    np.testing.assert_allclose(x, xr, rtol=0, atol=5e-16)
+    np.testing.assert_allclose(w, wr, rtol=0, atol=1e-13)
+    assert np.all(np.diff(x) > 0) and np.allclose(x, -x[::-1], rtol=0, atol=0)
+    if n > 8:
+        for f, integral in ((np.exp, math.e - 1 / math.e),
+                            (lambda t: np.sqrt(1.5 - t), (2.5**1.5 - 0.5**1.5) * 2 / 3),
+                            (lambda t: 1 / (1.01 - t), math.log(2.01 / 0.01))):
+            assert np.dot(w, f(x)) == pytest.approx(integral, rel=1e-14)
+    # The package's rules: Newton's above the threshold, leggauss's (bit for bit) below it.
+    used = nm._gauss_legendre_unit(n)
+    expected = (x, w) if n > nm.NEWTON_GAUSS_ABOVE else (xr, wr)
+    np.testing.assert_array_equal(used[0], expected[0])
+    np.testing.assert_array_equal(used[1], expected[1])
+
+
 def test_barycentric_matrix_reproduces_polynomials():
     source, _ = nm.gauss_legendre(8, 0.0, 1.0)
     target = np.linspace(0.0, 1.0, 13)
