@@ -47,6 +47,9 @@ jax.config.update("jax_enable_x64", True)
 
 import jmse_jax as jj  # noqa: E402
 
+sys.path.insert(0, str(common.TESTS))
+import oracles  # noqa: E402  (the closed-form upper bound, shared with the tests)
+
 NAMES = ("w020", "w040", "w131", "w222", "w220", "w311")
 SCALES = (0.0, 1e-3, 0.1, 1.0, 3.0, 8.0, 20.0)
 #: Relative tolerance on the bounds within the checked range (strength <= CHECKED_STRENGTH,
@@ -58,13 +61,6 @@ UNCHECKED_TOLERANCE = 0.1
 FLOAT32_EXTRA = 1e-4
 #: The ``high`` preset costs ~40 ms a design; it gets this share of the designs.
 HIGH_SHARE = 3
-
-
-def markov_upper_bound(u, variance, correlation_length):
-    """``(1 / 2 pi) iint_{|nu_x|, |nu_y| < u} S_x`` for ``MarkovSignal``, in closed form."""
-    c = 1.0 / (2.0 * math.pi * correlation_length)
-    angle = np.arctan(u * u / (c * np.sqrt(c * c + 2.0 * u * u)))
-    return (2.0 * variance / math.pi) * angle / (2.0 * math.pi)
 
 
 def draw(rng) -> dict:
@@ -100,7 +96,8 @@ def run_one(preset: str, dtype, designs: list[dict]) -> dict:
                    ("field", "u", "noise", "signal_variance", "correlation_length")]
         value, grads = value_and_grad(jnp.asarray(d["coefficients"], dtype), *scalars)
         lower = float(unaberrated(*scalars))
-        upper = markov_upper_bound(d["u"], d["signal_variance"], d["correlation_length"])
+        upper = oracles.markov_no_transfer_jmse(d["u"], d["signal_variance"],
+                                                d["correlation_length"])
         ab = jj.Seidel(**dict(zip(NAMES, d["coefficients"], strict=True)))
         strength = float(jj.aberration_strength(ab, d["field"], d["u"]))
         peak_snr = jj.MarkovSignal(d["signal_variance"], d["correlation_length"]).radial(
