@@ -1,0 +1,302 @@
+"""The cheapest fixed polar grid for each error level at one design, against the baseline.
+
+Issue 3 asks the default to be several times faster at the paper's Fig. 1 point than it is
+(target 2: at most the time of ``baseline_jmse`` at B = 64). The default is adaptive: it
+picks its grid from the design and verifies a cheap grid against a check grid. This script
+asks what the best possible choice of grid could reach at one design, with nothing spent on
+choosing or verifying it: it times many fixed polar grids (random draws from a family of node
+counts, plus the default's own first and check grids), measures each one's error against the
+design's converged reference, and reports the Pareto front of error against warm time. The
+cheapest grid on the front below an error level is a lower bound (up to the sampling of the
+family) on what any adaptive scheme over the polar overlap pipeline spends at that design.
+
+The front, ``baseline_jmse`` at B = 32 ... 256 and the default preset are then timed again in
+alternation (value and ``value_and_grad`` with respect to the Seidel coefficients), and the
+ratios to B = 64 are taken from those times. Usage (from the repository root; about 6 min
+on one core for 120 grids)::
+
+    taskset -c 1 .venv/bin/python benchmarks/grid_frontier.py [--problem fig1]
+        [--samples 120] [--seed 3] [--tag NAME]
+
+Writes ``benchmarks/results/grid_frontier[_NAME].{json,md,png}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+
+import _common as common
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+
+import jmse_jax as jj  # noqa: E402
+from jmse_jax import _merit  # noqa: E402
+
+#: The family of fixed grids: each count drawn independently from its list.
+FAMILY = dict(
+    radial=(8, 10, 12, 14, 16, 20, 24, 28),
+    angular=(3, 4, 5, 6, 8, 10),
+    se_radial=(100, 150, 200, 300, 400),
+    se_angular=(16, 24, 32, 40),
+    overlap_phi=(10, 12, 14, 16, 18, 20, 24),
+    overlap_t=(8, 10, 12, 14, 16),
+    floor=(6, 8, 10, 12),
+)
+#: Error levels of the report.
+LEVELS = (1e-3, 1e-4, 1e-5, 1e-6)
+BASELINES = (32, 64, 128, 256)
+
+
+def _grid_options(nodes, se_nodes, overlap_nodes, floor):
+    return dict(nodes=tuple(nodes), se_nodes=tuple(se_nodes),
+                overlap_nodes=tuple(overlap_nodes), overlap_floor=int(floor))
+
+
+def sample_grids(samples: int, seed: int) -> list[dict]:
+    """``samples`` random grids of ``FAMILY`` and the default's first and check grids."""
+    rng = np.random.default_rng(seed)
+    grids = [dict(_merit._FIRST_GRID), dict(_merit._CHECK_GRID)]
+    seen = {repr(sorted(g.items())) for g in grids}
+    attempts = 0
+    while len(grids) < samples + 2 and attempts < 100 * samples:
+        attempts += 1
+        pick = {k: int(rng.choice(v)) for k, v in FAMILY.items()}
+        floor = min(pick["floor"], pick["overlap_phi"], pick["overlap_t"])
+        grid = _grid_options((pick["radial"], pick["angular"]),
+                             (pick["se_radial"], pick["se_angular"]),
+                             (pick["overlap_phi"], pick["overlap_t"]), floor)
+        key = repr(sorted(grid.items()))
+        if key not in seen:
+            seen.add(key)
+            grids.append(grid)
+    return grids
+
+
+def _label(grid) -> str:
+    return (f"{tuple(grid['nodes'])} / {tuple(grid['se_nodes'])} / "
+            f"{tuple(grid['overlap_nodes'])} floor {grid['overlap_floor']}")
+
+
+def _fn(**options):
+    def fn(aberrations, field, u, signal, noise):
+        return jj.jmse(aberrations, field, u, signal, noise, **options)
+
+    return fn
+
+
+def _baseline(B):
+    def fn(aberrations, field, u, signal, noise):
+        return jj.baseline_jmse(aberrations, field, u, signal, noise, B=B)
+
+    return fn
+
+
+def pareto(rows) -> list[dict]:
+    """Rows not beaten in both time and error by another row (ascending time)."""
+    front, best = [], math.inf
+    for row in sorted(rows, key=lambda r: r["value_s"]):
+        if row["relative_error"] < best:
+            front.append(row)
+            best = row["relative_error"]
+    return front
+
+
+def alternate(entries, args, rounds: int, calls: int) -> None:
+    """Time every entry's value and value_and_grad in alternation (``rounds`` rounds of
+    ``calls`` calls each); store medians and minima in the entries."""
+    compiled = []
+    for entry in entries:
+        value = jax.jit(entry["fn"]).lower(*args).compile()
+        vag = jax.jit(jax.value_and_grad(entry["fn"], argnums=0)).lower(*args).compile()
+        jax.block_until_ready(value(*args))
+        jax.block_until_ready(vag(*args))
+        compiled.append((value, vag))
+    times = [([], []) for _ in entries]
+    for _ in range(rounds):
+        for fns, out in zip(compiled, times, strict=True):
+            for fn, bucket in zip(fns, out, strict=True):
+                for _ in range(calls):
+                    start = time.perf_counter()
+                    jax.block_until_ready(fn(*args))
+                    bucket.append(time.perf_counter() - start)
+    for entry, (value_t, vag_t) in zip(entries, times, strict=True):
+        entry.update(alt_value_s=statistics.median(value_t), alt_value_min_s=min(value_t),
+                     alt_vag_s=statistics.median(vag_t), alt_vag_min_s=min(vag_t))
+
+
+def run(problem: str, samples: int, seed: int, rounds: int, calls: int) -> dict:
+    start = time.perf_counter()
+    cases = {c.name: c for c in common.load_bank()}
+    case = cases[problem]
+    args = case.arguments
+    info = common.machine_info()
+
+    grids = sample_grids(samples, seed)
+    rows = []
+    for i, grid in enumerate(grids):
+        timed = common.time_compiled(_fn(**grid), args, budget_s=0.3, max_repeats=25)
+        row = dict(grid=grid, label=_label(grid), value=float(timed["value"]),
+                   relative_error=common.relative_error(timed["value"], case.reference),
+                   value_s=timed["warm_min_s"], compile_s=timed["compile_s"],
+                   otf_nodes=2 * grid["nodes"][0] * grid["nodes"][1])
+        rows.append(row)
+        print(f"[{i + 1}/{len(grids)}] {row['label']}: error {row['relative_error']:.1e}, "
+              f"{row['value_s'] * 1e6:.0f} us", flush=True)
+    front = [r for r in pareto(rows) if r["relative_error"] <= LEVELS[0]]
+
+    reference_entries = [dict(name=f"baseline B={B}", fn=_baseline(B)) for B in BASELINES]
+    reference_entries.append(dict(name="preset default", fn=_fn()))
+    for entry in reference_entries:
+        entry["relative_error"] = common.relative_error(jax.jit(entry["fn"])(*args),
+                                                        case.reference)
+    front_entries = [dict(name=r["label"], fn=_fn(**r["grid"]), row=r) for r in front]
+    print(f"alternated timing of {len(front_entries)} front grids, "
+          f"{len(reference_entries)} references ...", flush=True)
+    alternate(reference_entries + front_entries, args, rounds, calls)
+    for entry in front_entries:
+        entry["row"].update(alt_value_s=entry["alt_value_s"], alt_vag_s=entry["alt_vag_s"],
+                            alt_value_min_s=entry["alt_value_min_s"],
+                            alt_vag_min_s=entry["alt_vag_min_s"])
+    references = {e["name"]: {k: v for k, v in e.items() if k != "fn"}
+                  for e in reference_entries}
+    b64 = references["baseline B=64"]
+
+    levels = []
+    for level in LEVELS:
+        meeting = [r for r in front if r["relative_error"] <= level]
+        if not meeting:
+            levels.append(dict(level=level, grid=None))
+            continue
+        best_value = min(meeting, key=lambda r: r["alt_value_s"])
+        best_vag = min(meeting, key=lambda r: r["alt_vag_s"])
+        levels.append(dict(
+            level=level,
+            grid=best_value["label"], value_s=best_value["alt_value_s"],
+            value_error=best_value["relative_error"],
+            value_over_b64=best_value["alt_value_s"] / b64["alt_value_s"],
+            vag_grid=best_vag["label"], vag_s=best_vag["alt_vag_s"],
+            vag_over_b64=best_vag["alt_vag_s"] / b64["alt_vag_s"]))
+    return dict(
+        machine=info, problem=problem, reference=case.reference,
+        reference_convergence=case.convergence, samples=samples, seed=seed,
+        family=FAMILY, rounds=rounds, calls=calls, rows=rows,
+        front=[r["label"] for r in front], references=references, levels=levels,
+        load_at_end=common.load_average(), wall_s=time.perf_counter() - start,
+    )
+
+
+def _e(x):
+    return "–" if x is None else f"{x:.1e}"
+
+
+def markdown(report) -> str:
+    m = report["machine"]
+    refs = report["references"]
+    b64 = refs["baseline B=64"]
+    lines = [
+        f"# The cheapest fixed grid per error level: `{report['problem']}`",
+        "",
+        f"{m['cpu_model']}, {m['nproc']} CPU(s) used, jax {m['jax_version']}, {m['dtype']}, "
+        f"commit `{m['commit'][:10]}`, {m['date']}. Load average at start "
+        f"{m['load_at_start']['load_1min']:.2f}, at end {report['load_at_end']['load_1min']:.2f}. "
+        f"{len(report['rows'])} fixed polar grids ({report['samples']} random draws from the "
+        f"family below, seed {report['seed']}, plus the default's first and check grids), "
+        f"each timed alone (fastest of up to 25 warm calls); the front, the baselines and the "
+        f"default were then timed in alternation ({report['rounds']} rounds of "
+        f"{report['calls']} calls; medians), and the ratios use those times. Reference "
+        f"{report['reference']:.10e} (convergence {report['reference_convergence']:.1e}).",
+        "",
+        "## Cheapest grid per error level (no cost for choosing or checking it)",
+        "",
+        "| error at most | grid (value) | error | value | / B=64 value | value_and_grad "
+        "| / B=64 value_and_grad |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for lv in report["levels"]:
+        if lv["grid"] is None:
+            lines.append(f"| {lv['level']:.0e} | none in the sample | | | | | |")
+            continue
+        lines.append(
+            f"| {lv['level']:.0e} | {lv['grid']} | {_e(lv['value_error'])} | "
+            f"{common.fmt_seconds(lv['value_s'])} | {lv['value_over_b64']:.2f} | "
+            f"{common.fmt_seconds(lv['vag_s'])} | {lv['vag_over_b64']:.2f} |")
+    lines += ["", "## References, timed in the same alternation", "",
+              "| method | error | value | value_and_grad | value / B=64 |", "|---|---|---|---|---|"]
+    for name, r in refs.items():
+        lines.append(f"| {name} | {_e(r['relative_error'])} | "
+                     f"{common.fmt_seconds(r['alt_value_s'])} | "
+                     f"{common.fmt_seconds(r['alt_vag_s'])} | "
+                     f"{r['alt_value_s'] / b64['alt_value_s']:.2f} |")
+    lines += ["", "## The front (error at most 1e-3)", "",
+              "| grid: nodes / se_nodes / overlap_nodes | OTF nodes | error | value (alone) | "
+              "value | value_and_grad |", "|---|---|---|---|---|---|"]
+    for r in sorted((r for r in report["rows"] if "alt_value_s" in r),
+                    key=lambda r: r["value_s"]):
+        lines.append(f"| {r['label']} | {r['otf_nodes']} | {_e(r['relative_error'])} | "
+                     f"{common.fmt_seconds(r['value_s'])} | "
+                     f"{common.fmt_seconds(r['alt_value_s'])} | "
+                     f"{common.fmt_seconds(r['alt_vag_s'])} |")
+    lines += ["", "Family: " + ", ".join(f"{k} {list(v)}" for k, v in report["family"].items())
+              + ".", ""]
+    return "\n".join(lines)
+
+
+def plot(report, path) -> None:
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    rows = report["rows"]
+    floor = 1e-12
+    ax.scatter([r["value_s"] for r in rows], [max(r["relative_error"], floor) for r in rows],
+               s=12, color="C0", alpha=0.6, label="fixed polar grids (timed alone)")
+    front = sorted((r for r in rows if "alt_value_s" in r), key=lambda r: r["value_s"])
+    ax.step([r["value_s"] for r in front], [max(r["relative_error"], floor) for r in front],
+            where="post", color="C0", linewidth=2, label="front")
+    for name, r in report["references"].items():
+        style = dict(color="k", marker="s") if name.startswith("baseline") else dict(
+            color="C3", marker="*", markersize=14)
+        ax.plot([r["alt_value_s"]], [max(r["relative_error"], floor)], linestyle="none",
+                **style)
+        ax.annotate(name, (r["alt_value_s"], max(r["relative_error"], floor)),
+                    textcoords="offset points", xytext=(5, 4), fontsize=8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("warm time of one JMSE value [s]")
+    ax.set_ylabel(f"relative error at {report['problem']}")
+    ax.set_title("Fixed polar grids against the baseline at one design")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--problem", default="fig1", help="bank problem (tests/problems.py)")
+    parser.add_argument("--samples", type=int, default=120, help="random grids")
+    parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=9)
+    parser.add_argument("--calls", type=int, default=5)
+    parser.add_argument("--tag", default="")
+    a = parser.parse_args(argv)
+    report = run(a.problem, a.samples, a.seed, a.rounds, a.calls)
+    name = "grid_frontier" + (f"_{a.tag}" if a.tag else "")
+    common.RESULTS.mkdir(parents=True, exist_ok=True)
+    (common.RESULTS / f"{name}.json").write_text(json.dumps(report, indent=1))
+    (common.RESULTS / f"{name}.md").write_text(markdown(report))
+    plot(report, common.RESULTS / f"{name}.png")
+    print(markdown(report))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
