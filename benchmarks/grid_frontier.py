@@ -80,6 +80,31 @@ def sample_grids(samples: int, seed: int) -> list[dict]:
     return grids
 
 
+_KEYS = ("radial", "angular", "se_radial", "se_angular", "overlap_phi", "overlap_t", "floor")
+
+
+def _counts(grid) -> dict:
+    return dict(zip(_KEYS, (*grid["nodes"], *grid["se_nodes"], *grid["overlap_nodes"],
+                            grid["overlap_floor"]), strict=True))
+
+
+def _from_counts(c) -> dict:
+    floor = min(c["floor"], c["overlap_phi"], c["overlap_t"])
+    return _grid_options((c["radial"], c["angular"]), (c["se_radial"], c["se_angular"]),
+                         (c["overlap_phi"], c["overlap_t"]), floor)
+
+
+def neighbours(grid) -> list[dict]:
+    """The grids one step cheaper in one count (the next smaller value of ``FAMILY``, or
+    the value less one step of the family's spacing when the count lies outside it)."""
+    out = []
+    for key, c in _counts(grid).items():
+        smaller = [v for v in FAMILY[key] if v < c]
+        if smaller:
+            out.append(_from_counts({**_counts(grid), key: max(smaller)}))
+    return out
+
+
 def _label(grid) -> str:
     return (f"{tuple(grid['nodes'])} / {tuple(grid['se_nodes'])} / "
             f"{tuple(grid['overlap_nodes'])} floor {grid['overlap_floor']}")
@@ -132,24 +157,38 @@ def alternate(entries, args, rounds: int, calls: int) -> None:
                      alt_vag_s=statistics.median(vag_t), alt_vag_min_s=min(vag_t))
 
 
-def run(problem: str, samples: int, seed: int, rounds: int, calls: int) -> dict:
+def run(problem: str, samples: int, seed: int, refine: int, rounds: int,
+        calls: int) -> dict:
     start = time.perf_counter()
     cases = {c.name: c for c in common.load_bank()}
     case = cases[problem]
     args = case.arguments
     info = common.machine_info()
 
-    grids = sample_grids(samples, seed)
-    rows = []
-    for i, grid in enumerate(grids):
+    rows, seen = [], set()
+
+    def measure(grid, origin):
+        key = repr(sorted(grid.items()))
+        if key in seen:
+            return
+        seen.add(key)
         timed = common.time_compiled(_fn(**grid), args, budget_s=0.3, max_repeats=25)
         row = dict(grid=grid, label=_label(grid), value=float(timed["value"]),
                    relative_error=common.relative_error(timed["value"], case.reference),
                    value_s=timed["warm_min_s"], compile_s=timed["compile_s"],
-                   otf_nodes=2 * grid["nodes"][0] * grid["nodes"][1])
+                   otf_nodes=2 * grid["nodes"][0] * grid["nodes"][1], origin=origin)
         rows.append(row)
-        print(f"[{i + 1}/{len(grids)}] {row['label']}: error {row['relative_error']:.1e}, "
+        print(f"[{len(rows)}, {origin}] {row['label']}: error {row['relative_error']:.1e}, "
               f"{row['value_s'] * 1e6:.0f} us", flush=True)
+
+    for grid in sample_grids(samples, seed):
+        measure(grid, "sample")
+    # Local refinement: every grid on the front (below the largest level) is tried one step
+    # cheaper in each count, ``refine`` times over.
+    for round_ in range(refine):
+        for row in [r for r in pareto(rows) if r["relative_error"] <= LEVELS[0]]:
+            for grid in neighbours(row["grid"]):
+                measure(grid, f"refine {round_ + 1}")
     front = [r for r in pareto(rows) if r["relative_error"] <= LEVELS[0]]
 
     reference_entries = [dict(name=f"baseline B={B}", fn=_baseline(B)) for B in BASELINES]
@@ -186,7 +225,7 @@ def run(problem: str, samples: int, seed: int, rounds: int, calls: int) -> dict:
             vag_over_b64=best_vag["alt_vag_s"] / b64["alt_vag_s"]))
     return dict(
         machine=info, problem=problem, reference=case.reference,
-        reference_convergence=case.convergence, samples=samples, seed=seed,
+        reference_convergence=case.convergence, samples=samples, seed=seed, refine=refine,
         family=FAMILY, rounds=rounds, calls=calls, rows=rows,
         front=[r["label"] for r in front], references=references, levels=levels,
         load_at_end=common.load_average(), wall_s=time.perf_counter() - start,
@@ -208,7 +247,8 @@ def markdown(report) -> str:
         f"commit `{m['commit'][:10]}`, {m['date']}. Load average at start "
         f"{m['load_at_start']['load_1min']:.2f}, at end {report['load_at_end']['load_1min']:.2f}. "
         f"{len(report['rows'])} fixed polar grids ({report['samples']} random draws from the "
-        f"family below, seed {report['seed']}, plus the default's first and check grids), "
+        f"family below, seed {report['seed']}, the default's first and check grids, and "
+        f"{report['refine']} rounds of the front's neighbours one step cheaper in one count), "
         f"each timed alone (fastest of up to 25 warm calls); the front, the baselines and the "
         f"default were then timed in alternation ({report['rounds']} rounds of "
         f"{report['calls']} calls; medians), and the ratios use those times. Reference "
@@ -284,11 +324,13 @@ def main(argv=None) -> int:
     parser.add_argument("--problem", default="fig1", help="bank problem (tests/problems.py)")
     parser.add_argument("--samples", type=int, default=120, help="random grids")
     parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--refine", type=int, default=2,
+                        help="rounds of one-step-cheaper neighbours of the front")
     parser.add_argument("--rounds", type=int, default=9)
     parser.add_argument("--calls", type=int, default=5)
     parser.add_argument("--tag", default="")
     a = parser.parse_args(argv)
-    report = run(a.problem, a.samples, a.seed, a.rounds, a.calls)
+    report = run(a.problem, a.samples, a.seed, a.refine, a.rounds, a.calls)
     name = "grid_frontier" + (f"_{a.tag}" if a.tag else "")
     common.RESULTS.mkdir(parents=True, exist_ok=True)
     (common.RESULTS / f"{name}.json").write_text(json.dumps(report, indent=1))
