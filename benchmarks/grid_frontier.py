@@ -291,6 +291,7 @@ def markdown(report) -> str:
 
 def plot(report, path) -> None:
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     fig, ax = plt.subplots(figsize=(8, 5.5))
     rows = report["rows"]
@@ -309,7 +310,10 @@ def plot(report, path) -> None:
                     textcoords="offset points", xytext=(5, 4), fontsize=8)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("warm time of one JMSE value [s]")
+    ax.xaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda x, _: f"{x * 1e3:g}"))
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_xlabel("warm time of one JMSE value [ms]")
     ax.set_ylabel(f"relative error at {report['problem']}")
     ax.set_title("Fixed polar grids against the baseline at one design")
     ax.grid(True, which="both", alpha=0.3)
@@ -329,9 +333,16 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=9)
     parser.add_argument("--calls", type=int, default=5)
     parser.add_argument("--tag", default="")
+    parser.add_argument("--replot", action="store_true",
+                        help="redraw the table and plot from the stored JSON only")
     a = parser.parse_args(argv)
-    report = run(a.problem, a.samples, a.seed, a.refine, a.rounds, a.calls)
     name = "grid_frontier" + (f"_{a.tag}" if a.tag else "")
+    if a.replot:
+        report = json.loads((common.RESULTS / f"{name}.json").read_text())
+        (common.RESULTS / f"{name}.md").write_text(markdown(report))
+        plot(report, common.RESULTS / f"{name}.png")
+        return 0
+    report = run(a.problem, a.samples, a.seed, a.refine, a.rounds, a.calls)
     common.RESULTS.mkdir(parents=True, exist_ok=True)
     (common.RESULTS / f"{name}.json").write_text(json.dumps(report, indent=1))
     (common.RESULTS / f"{name}.md").write_text(markdown(report))
