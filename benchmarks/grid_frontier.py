@@ -10,13 +10,14 @@ design's converged reference, and reports the Pareto front of error against warm
 cheapest grid on the front below an error level is a lower bound (up to the sampling of the
 family) on what any adaptive scheme over the polar overlap pipeline spends at that design.
 
-The front, ``baseline_jmse`` at B = 32 ... 256 and the default preset are then timed again in
+The front, ``baseline_jmse`` at B = 32 ... 512 and the default preset are then timed again in
 alternation (value and ``value_and_grad`` with respect to the Seidel coefficients), and the
-ratios to B = 64 are taken from those times. Usage (from the repository root; about 6 min
-on one core for 120 grids)::
+ratios to the baselines are taken from those times. ``--dtype float32`` computes the grids in
+float32 (and adds B = 64 and the default in float32 to the references). Usage (from the
+repository root; about 10 min on one core)::
 
     taskset -c 1 .venv/bin/python benchmarks/grid_frontier.py [--problem fig1]
-        [--samples 120] [--seed 3] [--tag NAME]
+        [--samples 120] [--refine 2] [--seed 3] [--dtype float64] [--tag NAME]
 
 Writes ``benchmarks/results/grid_frontier[_NAME].{json,md,png}``.
 """
@@ -35,6 +36,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
@@ -52,7 +54,7 @@ FAMILY = dict(
 )
 #: Error levels of the report.
 LEVELS = (1e-3, 1e-4, 1e-5, 1e-6)
-BASELINES = (32, 64, 128, 256)
+BASELINES = (32, 64, 128, 256, 512)
 
 
 def _grid_options(nodes, se_nodes, overlap_nodes, floor):
@@ -110,11 +112,26 @@ def _label(grid) -> str:
             f"{tuple(grid['overlap_nodes'])} floor {grid['overlap_floor']}")
 
 
-def _fn(**options):
+def _fn(dtype="float64", **options):
+    """The merit with ``options``; in float32 its arguments are cast on entry and its value
+    returned in float64 (errors are taken against the float64 reference)."""
     def fn(aberrations, field, u, signal, noise):
         return jj.jmse(aberrations, field, u, signal, noise, **options)
 
-    return fn
+    if dtype == "float64":
+        return fn
+    return _in_float32(fn)
+
+
+def _in_float32(fn):
+    def cast(tree):
+        return jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32), tree)
+
+    def wrapped(aberrations, field, u, signal, noise):
+        return fn(cast(aberrations), cast(field), cast(u), cast(signal),
+                  cast(noise)).astype(jnp.float64)
+
+    return wrapped
 
 
 def _baseline(B):
@@ -157,8 +174,8 @@ def alternate(entries, args, rounds: int, calls: int) -> None:
                      alt_vag_s=statistics.median(vag_t), alt_vag_min_s=min(vag_t))
 
 
-def run(problem: str, samples: int, seed: int, refine: int, rounds: int,
-        calls: int) -> dict:
+def run(problem: str, samples: int, seed: int, refine: int, rounds: int, calls: int,
+        dtype: str = "float64") -> dict:
     start = time.perf_counter()
     cases = {c.name: c for c in common.load_bank()}
     case = cases[problem]
@@ -172,7 +189,7 @@ def run(problem: str, samples: int, seed: int, refine: int, rounds: int,
         if key in seen:
             return
         seen.add(key)
-        timed = common.time_compiled(_fn(**grid), args, budget_s=0.3, max_repeats=25)
+        timed = common.time_compiled(_fn(dtype, **grid), args, budget_s=0.3, max_repeats=25)
         row = dict(grid=grid, label=_label(grid), value=float(timed["value"]),
                    relative_error=common.relative_error(timed["value"], case.reference),
                    value_s=timed["warm_min_s"], compile_s=timed["compile_s"],
@@ -193,10 +210,13 @@ def run(problem: str, samples: int, seed: int, refine: int, rounds: int,
 
     reference_entries = [dict(name=f"baseline B={B}", fn=_baseline(B)) for B in BASELINES]
     reference_entries.append(dict(name="preset default", fn=_fn()))
+    if dtype != "float64":
+        reference_entries += [dict(name="baseline B=64 float32", fn=_in_float32(_baseline(64))),
+                              dict(name="preset default float32", fn=_fn(dtype))]
     for entry in reference_entries:
         entry["relative_error"] = common.relative_error(jax.jit(entry["fn"])(*args),
                                                         case.reference)
-    front_entries = [dict(name=r["label"], fn=_fn(**r["grid"]), row=r) for r in front]
+    front_entries = [dict(name=r["label"], fn=_fn(dtype, **r["grid"]), row=r) for r in front]
     print(f"alternated timing of {len(front_entries)} front grids, "
           f"{len(reference_entries)} references ...", flush=True)
     alternate(reference_entries + front_entries, args, rounds, calls)
@@ -207,6 +227,7 @@ def run(problem: str, samples: int, seed: int, refine: int, rounds: int,
     references = {e["name"]: {k: v for k, v in e.items() if k != "fn"}
                   for e in reference_entries}
     b64 = references["baseline B=64"]
+    b512 = references["baseline B=512"]
 
     levels = []
     for level in LEVELS:
@@ -221,11 +242,13 @@ def run(problem: str, samples: int, seed: int, refine: int, rounds: int,
             grid=best_value["label"], value_s=best_value["alt_value_s"],
             value_error=best_value["relative_error"],
             value_over_b64=best_value["alt_value_s"] / b64["alt_value_s"],
+            b512_over_value=b512["alt_value_s"] / best_value["alt_value_s"],
             vag_grid=best_vag["label"], vag_s=best_vag["alt_vag_s"],
             vag_over_b64=best_vag["alt_vag_s"] / b64["alt_vag_s"]))
     return dict(
         machine=info, problem=problem, reference=case.reference,
         reference_convergence=case.convergence, samples=samples, seed=seed, refine=refine,
+        grid_dtype=dtype,
         family=FAMILY, rounds=rounds, calls=calls, rows=rows,
         front=[r["label"] for r in front], references=references, levels=levels,
         load_at_end=common.load_average(), wall_s=time.perf_counter() - start,
@@ -243,7 +266,9 @@ def markdown(report) -> str:
     lines = [
         f"# The cheapest fixed grid per error level: `{report['problem']}`",
         "",
-        f"{m['cpu_model']}, {m['nproc']} CPU(s) used, jax {m['jax_version']}, {m['dtype']}, "
+        f"{m['cpu_model']}, {m['nproc']} CPU(s) used, jax {m['jax_version']}, grids in "
+        f"{report.get('grid_dtype', 'float64')} (the baselines and the default in float64 "
+        f"unless named; errors against the float64 reference), "
         f"commit `{m['commit'][:10]}`, {m['date']}. Load average at start "
         f"{m['load_at_start']['load_1min']:.2f}, at end {report['load_at_end']['load_1min']:.2f}. "
         f"{len(report['rows'])} fixed polar grids ({report['samples']} random draws from the "
@@ -256,17 +281,18 @@ def markdown(report) -> str:
         "",
         "## Cheapest grid per error level (no cost for choosing or checking it)",
         "",
-        "| error at most | grid (value) | error | value | / B=64 value | value_and_grad "
-        "| / B=64 value_and_grad |",
-        "|---|---|---|---|---|---|---|",
+        "| error at most | grid (value) | error | value | / B=64 value | B=512 value / value "
+        "| value_and_grad | / B=64 value_and_grad |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for lv in report["levels"]:
         if lv["grid"] is None:
-            lines.append(f"| {lv['level']:.0e} | none in the sample | | | | | |")
+            lines.append(f"| {lv['level']:.0e} | none in the sample | | | | | | |")
             continue
         lines.append(
             f"| {lv['level']:.0e} | {lv['grid']} | {_e(lv['value_error'])} | "
             f"{common.fmt_seconds(lv['value_s'])} | {lv['value_over_b64']:.2f} | "
+            f"{lv['b512_over_value']:.0f}x | "
             f"{common.fmt_seconds(lv['vag_s'])} | {lv['vag_over_b64']:.2f} |")
     lines += ["", "## References, timed in the same alternation", "",
               "| method | error | value | value_and_grad | value / B=64 |", "|---|---|---|---|---|"]
@@ -332,6 +358,8 @@ def main(argv=None) -> int:
                         help="rounds of one-step-cheaper neighbours of the front")
     parser.add_argument("--rounds", type=int, default=9)
     parser.add_argument("--calls", type=int, default=5)
+    parser.add_argument("--dtype", default="float64", choices=("float64", "float32"),
+                        help="dtype of the grids' computation (references stay float64)")
     parser.add_argument("--tag", default="")
     parser.add_argument("--replot", action="store_true",
                         help="redraw the table and plot from the stored JSON only")
@@ -342,7 +370,7 @@ def main(argv=None) -> int:
         (common.RESULTS / f"{name}.md").write_text(markdown(report))
         plot(report, common.RESULTS / f"{name}.png")
         return 0
-    report = run(a.problem, a.samples, a.seed, a.refine, a.rounds, a.calls)
+    report = run(a.problem, a.samples, a.seed, a.refine, a.rounds, a.calls, a.dtype)
     common.RESULTS.mkdir(parents=True, exist_ok=True)
     (common.RESULTS / f"{name}.json").write_text(json.dumps(report, indent=1))
     (common.RESULTS / f"{name}.md").write_text(markdown(report))
