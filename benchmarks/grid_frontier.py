@@ -157,21 +157,91 @@ def alternate(entries, args, rounds: int, calls: int) -> None:
     compiled = []
     for entry in entries:
         value = jax.jit(entry["fn"]).lower(*args).compile()
-        vag = jax.jit(jax.value_and_grad(entry["fn"], argnums=0)).lower(*args).compile()
         jax.block_until_ready(value(*args))
-        jax.block_until_ready(vag(*args))
-        compiled.append((value, vag))
+        fns = (value,)
+        if not entry.get("value_only"):
+            vag = jax.jit(jax.value_and_grad(entry["fn"], argnums=0)).lower(*args).compile()
+            jax.block_until_ready(vag(*args))
+            fns = (value, vag)
+        compiled.append(fns)
     times = [([], []) for _ in entries]
     for _ in range(rounds):
         for fns, out in zip(compiled, times, strict=True):
-            for fn, bucket in zip(fns, out, strict=True):
+            for fn, bucket in zip(fns, out[:len(fns)], strict=True):
                 for _ in range(calls):
                     start = time.perf_counter()
                     jax.block_until_ready(fn(*args))
                     bucket.append(time.perf_counter() - start)
     for entry, (value_t, vag_t) in zip(entries, times, strict=True):
-        entry.update(alt_value_s=statistics.median(value_t), alt_value_min_s=min(value_t),
-                     alt_vag_s=statistics.median(vag_t), alt_vag_min_s=min(vag_t))
+        entry.update(alt_value_s=statistics.median(value_t), alt_value_min_s=min(value_t))
+        if vag_t:
+            entry.update(alt_vag_s=statistics.median(vag_t), alt_vag_min_s=min(vag_t))
+
+
+def _default_parts():
+    """The adaptive default's parts at a design its shortcut serves (``jmse_jax._merit``
+    internals, value only): the first grid, the first grid with its interpolation-error
+    estimate, the float32 check grid and the strength that picks the tier."""
+    options = jj.jmse_options("default")
+    first = {**options, **_merit._FIRST_GRID, "peaks": False}
+    check = {**options, **_merit._CHECK_GRID, "peaks": False}
+
+    def part(fn):
+        def wrapped(aberrations, field, u, signal, noise):
+            return fn((aberrations, field, u, signal, noise))
+
+        return wrapped
+
+    def dtype_of(ops):
+        return jnp.result_type(*jax.tree_util.tree_leaves(ops))
+
+    return [
+        dict(name="default: first grid",
+             fn=part(lambda o: _merit._apply_merit(first, dtype_of(o), o))),
+        dict(name="default: first grid and its estimate",
+             fn=part(lambda o: _merit._apply_estimated(first, dtype_of(o), o)[0])),
+        dict(name="default: check grid (float32)",
+             fn=part(lambda o: _merit._check_value(check, dtype_of(o), o))),
+        dict(name="default: strength", fn=part(lambda o: _merit._strength(*o[:3]))),
+    ]
+
+
+def components(problem: str, rounds: int, calls: int) -> dict:
+    """The default and its parts, B = 64 and B = 512, timed in alternation."""
+    case = {c.name: c for c in common.load_bank()}[problem]
+    args = case.arguments
+    info = common.machine_info()
+    entries = [dict(name="baseline B=64", fn=_baseline(64)),
+               dict(name="baseline B=512", fn=_baseline(512)),
+               dict(name="preset default", fn=_fn())]
+    entries += [dict(e, value_only=True) for e in _default_parts()]
+    alternate(entries, args, rounds, calls)
+    return dict(machine=info, problem=problem, rounds=rounds, calls=calls,
+                parts={e["name"]: {k: v for k, v in e.items() if k not in ("fn",)}
+                       for e in entries},
+                load_at_end=common.load_average())
+
+
+def components_markdown(report) -> str:
+    m = report["machine"]
+    lines = [
+        f"# The default's parts at `{report['problem']}`",
+        "",
+        f"{m['cpu_model']}, {m['nproc']} CPU(s) used, jax {m['jax_version']}, {m['dtype']}, "
+        f"commit `{m['commit'][:10]}`, {m['date']}. Load average at start "
+        f"{m['load_at_start']['load_1min']:.2f}, at end "
+        f"{report['load_at_end']['load_1min']:.2f}. Alternated, {report['rounds']} rounds "
+        f"of {report['calls']} calls: medians (fastest).",
+        "",
+        "| program | value | value_and_grad |",
+        "|---|---|---|",
+    ]
+    for name, e in report["parts"].items():
+        vag = ("–" if "alt_vag_s" not in e else f"{common.fmt_seconds(e['alt_vag_s'])} "
+               f"({common.fmt_seconds(e['alt_vag_min_s'])})")
+        lines.append(f"| {name} | {common.fmt_seconds(e['alt_value_s'])} "
+                     f"({common.fmt_seconds(e['alt_value_min_s'])}) | {vag} |")
+    return "\n".join(lines + [""])
 
 
 def run(problem: str, samples: int, seed: int, refine: int, rounds: int, calls: int,
@@ -361,10 +431,20 @@ def main(argv=None) -> int:
     parser.add_argument("--dtype", default="float64", choices=("float64", "float32"),
                         help="dtype of the grids' computation (references stay float64)")
     parser.add_argument("--tag", default="")
+    parser.add_argument("--components", action="store_true",
+                        help="only time the default's parts against B = 64 and B = 512 "
+                             "(grid_frontier_components[_NAME].{json,md})")
     parser.add_argument("--replot", action="store_true",
                         help="redraw the table and plot from the stored JSON only")
     a = parser.parse_args(argv)
     name = "grid_frontier" + (f"_{a.tag}" if a.tag else "")
+    if a.components:
+        report = components(a.problem, a.rounds, a.calls)
+        stem = common.RESULTS / (name.replace("grid_frontier", "grid_frontier_components"))
+        stem.with_suffix(".json").write_text(json.dumps(report, indent=1))
+        stem.with_suffix(".md").write_text(components_markdown(report))
+        print(components_markdown(report))
+        return 0
     if a.replot:
         report = json.loads((common.RESULTS / f"{name}.json").read_text())
         (common.RESULTS / f"{name}.md").write_text(markdown(report))
