@@ -20,6 +20,9 @@ Usage (from the repository root; ~3 min on 2 cores)::
         [--first-tol 1e-5] [--check "nodes=16,8 se_nodes=160,24 overlap_nodes=14,12" ...]
 
 Prints its tables and writes ``results/recheck_shortcut.json`` and ``.md``.
+
+``--probes`` asks instead whether the check grid could be replaced by error estimates taken
+from the first grid itself (``probes``; writes ``results/recheck_shortcut_probes.*``).
 """
 
 from __future__ import annotations
@@ -166,6 +169,61 @@ def _tier_report(tier, first_grid, first_tol, lines, check_grid=None):
     return row
 
 
+#: The probes' grids: the first grid with a higher overlap order, and with a finer fine rule.
+PROBE_OVERLAP = (24, 20)
+PROBE_FINE = (420, 56)
+
+
+def probes(lines) -> list[dict]:
+    """A rule without the check grid, with its probes at full cost.
+
+    The first grid's error has three sources: the interpolation of the OTF from the coarse
+    nodes (which the estimate measures), the overlap rule at each node and the fine S_e
+    rule. Here the last two are measured exactly, as the relative change of the first
+    grid's value when its overlap order is raised to ``PROBE_OVERLAP`` and when its fine
+    rule is refined to ``PROBE_FINE``, and the first grid is kept when the estimate and both
+    probes are under tolerances. Probes this exact cost more than the check grid; the study
+    asks whether the check carries information beyond them, i.e. whether a cheap probe of
+    the two errors could stand in for it.
+    """
+    rows = []
+    lines += ["| tier | designs | rule | first kept | worst kept |", "|---|---|---|---|---|"]
+    for tier, (_, _, _, shortcut) in enumerate(jj.DEFAULT_TIERS):
+        if shortcut is None or shortcut.first is None:
+            continue
+        names, args, refs = _served(tier)
+        first_grid = shortcut.first
+        first = _values(first_grid, args)
+        error = np.abs(first / refs - 1.0)
+        estimate = _estimates(first_grid, args)
+        check = _values(shortcut.check, args, float32=True)
+        overlap = np.abs(_values({**first_grid, "overlap_nodes": PROBE_OVERLAP}, args)
+                         / first - 1.0)
+        fine = np.abs(_values({**first_grid, "se_nodes": PROBE_FINE}, args) / first - 1.0)
+        present = np.asarray(_first_kept(first, estimate, check, shortcut.rtol,
+                                         shortcut.first_tol))
+        rules = [("present: estimate <= 1e-5 and the check agrees to 1e-5", present)]
+        for tol_e in (1e-5, 5e-6, 3e-6):
+            for tol_p in (1e-5, 1e-6):
+                rules.append((f"estimate <= {tol_e:.0e}, both probes <= {tol_p:.0e}",
+                              (estimate <= tol_e) & (overlap <= tol_p) & (fine <= tol_p)))
+            rules.append((f"estimate <= {tol_e:.0e}, overlap probe <= 1e-6 (no fine probe)",
+                          (estimate <= tol_e) & (overlap <= 1e-6)))
+        for text, kept in rules:
+            worst = _worst(error, kept)
+            lines.append(f"| {tier} | {len(names)} | {text} | {int(kept.sum())} | "
+                         f"{worst:.1e} |")
+            print(lines[-1], flush=True)
+            rows.append(dict(tier=tier, designs=len(names), rule=text,
+                             kept=int(kept.sum()), worst_kept=worst))
+        ratio = error / np.maximum(estimate + overlap + fine, 1e-300)
+        rows.append(dict(tier=tier, error_over_sum_of_estimates_max=float(ratio.max()),
+                         error_over_sum_of_estimates_median=float(np.median(ratio))))
+        lines.append(f"| {tier} | {len(names)} | error / (estimate + probes): largest "
+                     f"{ratio.max():.2f}, median {np.median(ratio):.2f} | | |")
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--first", nargs="*", default=[],
@@ -174,8 +232,22 @@ def main() -> None:
                         help="error-estimate tolerance of the candidates (default: present)")
     parser.add_argument("--check", nargs="*", default=[],
                         help="candidate check grids (with the present first grid)")
+    parser.add_argument("--probes", action="store_true",
+                        help="the first grid kept by its estimate and two exact probes of "
+                             "its overlap and fine-rule errors, without the check grid")
     args_ = parser.parse_args()
     report = dict(machine=common.machine_info(), rows=[])
+    if args_.probes:
+        lines = ["# The shortcuts' check grid against exact probes of the first grid's "
+                 "errors", "", "`python benchmarks/recheck_shortcut.py --probes`", "",
+                 f"Commit {report['machine'].get('commit')}. Designs: the stored calibration "
+                 "designs and converged bank cases each shortcut serves (one first grid, "
+                 f"{jj.DEFAULT_TIERS[0][3].first}). Probes: the relative change of the first "
+                 f"grid's value with overlap order {PROBE_OVERLAP} and with fine rule "
+                 f"{PROBE_FINE}.", ""]
+        report["rows"] = probes(lines)
+        common.write_report("recheck_shortcut_probes", report, lines)
+        return
     command = " ".join(["python benchmarks/recheck_shortcut.py",
                         *(f'"{a}"' if " " in a else a for a in sys.argv[1:])])
     lines = ["# The default's shortcuts re-checked", "", f"`{command}`", "",
