@@ -22,7 +22,9 @@ Usage (from the repository root; ~3 min on 2 cores)::
 Prints its tables and writes ``results/recheck_shortcut.json`` and ``.md``.
 
 ``--probes`` asks instead whether the check grid could be replaced by error estimates taken
-from the first grid itself (``probes``; writes ``results/recheck_shortcut_probes.*``).
+from the first grid itself (``probes``; writes ``results/recheck_shortcut_probes.*``), with
+the overlap rule's error either measured exactly or bounded per node from the Bernstein
+ellipse (``overlap_error_bound.py``; about 8 min more).
 """
 
 from __future__ import annotations
@@ -174,6 +176,41 @@ PROBE_OVERLAP = (24, 20)
 PROBE_FINE = (420, 56)
 
 
+def _overlap_bound(grid, arguments, value):
+    """Relative bound of the first grid's overlap-rule error in the merit: the Bernstein-
+    ellipse bound of ``|dH|`` at each coarse node (``overlap_error_bound.node_bounds``, at
+    the node's panel order) times ``|dS_e / d|H||`` there, summed with the coarse rule's
+    weights, over the merit ``value``."""
+    import math
+
+    import overlap_error_bound
+
+    from jmse_jax._otf import _otf_overlap
+    from jmse_jax._quadrature import polar_panels, radial_panel_sizes
+
+    aberrations, field, u, signal, noise = arguments
+    coarse = polar_panels(u, *grid["nodes"], jnp.float64)
+    nu_x, nu_y = np.asarray(coarse.nu_x), np.asarray(coarse.nu_y)
+    weights = np.asarray(coarse.weights)
+    n_phi, n_t = grid["overlap_nodes"]
+    floor = grid["overlap_floor"]
+    total, start = 0.0, 0
+    for count, t_max in radial_panel_sizes(nu_x.shape[-1]):
+        order = tuple(min(n, math.ceil(floor + (n - floor) * t_max)) for n in (n_phi, n_t))
+        x = nu_x[..., start:start + count].ravel()
+        y = nu_y[..., start:start + count].ravel()
+        w = weights[..., start:start + count].ravel()
+        start += count
+        along, across = overlap_error_bound.node_bounds(aberrations, float(field), x, y,
+                                                        *order)
+        h = np.abs(np.asarray(_otf_overlap(aberrations, x, y, field, order)))
+        s_x, s_n = np.asarray(signal(x, y)), np.asarray(noise(x, y))
+        s_n = np.broadcast_to(s_n, s_x.shape)
+        sensitivity = 2.0 * h * s_x**2 * s_n / (s_x * h**2 + s_n) ** 2
+        total += float(np.sum(w * sensitivity * (along + across)))
+    return total / (2.0 * math.pi) / abs(value)
+
+
 def probes(lines) -> list[dict]:
     """A rule without the check grid, with its probes at full cost.
 
@@ -200,6 +237,8 @@ def probes(lines) -> list[dict]:
         overlap = np.abs(_values({**first_grid, "overlap_nodes": PROBE_OVERLAP}, args)
                          / first - 1.0)
         fine = np.abs(_values({**first_grid, "se_nodes": PROBE_FINE}, args) / first - 1.0)
+        bound = np.asarray([_overlap_bound(first_grid, a, v) for a, v in zip(args, first,
+                                                                            strict=True)])
         present = np.asarray(_first_kept(first, estimate, check, shortcut.rtol,
                                          shortcut.first_tol))
         rules = [("present: estimate <= 1e-5 and the check agrees to 1e-5", present)]
@@ -209,6 +248,10 @@ def probes(lines) -> list[dict]:
                               (estimate <= tol_e) & (overlap <= tol_p) & (fine <= tol_p)))
             rules.append((f"estimate <= {tol_e:.0e}, overlap probe <= 1e-6 (no fine probe)",
                           (estimate <= tol_e) & (overlap <= 1e-6)))
+            for tol_b in (3e-4, 1e-4, 3e-5, 1e-5):
+                rules.append((f"estimate <= {tol_e:.0e}, fine probe <= 1e-6, overlap bound "
+                              f"<= {tol_b:.0e}",
+                              (estimate <= tol_e) & (fine <= 1e-6) & (bound <= tol_b)))
         for text, kept in rules:
             worst = _worst(error, kept)
             lines.append(f"| {tier} | {len(names)} | {text} | {int(kept.sum())} | "
@@ -216,6 +259,14 @@ def probes(lines) -> list[dict]:
             print(lines[-1], flush=True)
             rows.append(dict(tier=tier, designs=len(names), rule=text,
                              kept=int(kept.sum()), worst_kept=worst))
+        resolved = overlap > 1e-12  # below it the probe is rounding
+        tight = bound[resolved] / overlap[resolved]
+        rows.append(dict(tier=tier, probe_resolved=int(resolved.sum()),
+                         bound_over_overlap_probe_min=float(tight.min()),
+                         bound_over_overlap_probe_median=float(np.median(tight))))
+        lines.append(f"| {tier} | {len(names)} | overlap bound / overlap probe, where the probe "
+                     f"exceeds 1e-12 ({int(resolved.sum())} designs): smallest "
+                     f"{tight.min():.2g}, median {np.median(tight):.2g} | | |")
         ratio = error / np.maximum(estimate + overlap + fine, 1e-300)
         rows.append(dict(tier=tier, error_over_sum_of_estimates_max=float(ratio.max()),
                          error_over_sum_of_estimates_median=float(np.median(ratio))))
