@@ -23,9 +23,10 @@ with the chord weights plus the across-chord bound, scaled as the engine scales 
 true error is the engine's ``H`` at the same order against order (64, 64). Usage (from the
 repository root; about 1 min)::
 
-    .venv/bin/python benchmarks/overlap_error_bound.py [CASE ...]
+    .venv/bin/python benchmarks/overlap_error_bound.py [--cheap] [CASE ...]
 
-Writes ``benchmarks/results/overlap_error_bound.{json,md}``. The bound as evaluated here
+Writes ``benchmarks/results/overlap_error_bound[_cheap].{json,md}`` (``--cheap``: the sparser
+sampling ``CHEAP``). The bound as evaluated here
 costs more than the quadrature it bounds (a cheap form is sketched in benchmarks/README.md,
 optimisation log, session 38).
 """
@@ -47,7 +48,8 @@ from jmse_jax._numerics import gauss_legendre  # noqa: E402
 
 #: Ellipse parameters over which each bound is minimised, and points per ellipse.
 RHOS = np.array([1.05, 1.1, 1.2, 1.35, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 6.0])
-THETA = np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False)
+N_THETA = 24
+THETA = np.linspace(0.0, 2.0 * np.pi, N_THETA, endpoint=False)
 #: Points along each chord at which the across-chord bound takes the largest ``|f|``.
 T_SAMPLES = np.linspace(-1.0, 1.0, 9)
 ORDERS = ((18, 14), (14, 10), (28, 24))
@@ -58,20 +60,28 @@ NODES = 300
 FLOOR = 1e-12
 
 
-def _ellipse(rho):
-    z = rho * np.exp(1j * THETA)
+#: A sparser sampling (``--cheap``): what a form inside the library could afford.
+CHEAP = dict(rhos=np.array([1.2, 1.5, 2.0, 3.0]), n_theta=8, t_samples=np.array([-1.0, 0.0, 1.0]))
+
+
+def _ellipse(rho, theta=THETA):
+    z = rho * np.exp(1j * theta)
     return 0.5 * (z + 1.0 / z)
 
 
-def _gauss_bound(log_m, n):
+def _gauss_bound(log_m, n, rhos=RHOS):
     """``min_rho (64/15) M rho^(-2n) / (rho^2 - 1)`` for ``log M`` on the last axis."""
-    log_bound = (math.log(64.0 / 15.0) + log_m - 2 * n * np.log(RHOS)
-                 - np.log(RHOS**2 - 1.0))
+    log_bound = (math.log(64.0 / 15.0) + log_m - 2 * n * np.log(rhos)
+                 - np.log(rhos**2 - 1.0))
     return np.exp(np.min(log_bound, axis=-1))
 
 
-def node_bounds(aberrations, field, nx, ny, n_phi, n_t):
-    """Bounds of the overlap rule's error at each node: ``(along the chords, across)``."""
+def node_bounds(aberrations, field, nx, ny, n_phi, n_t, rhos=RHOS, n_theta=N_THETA,
+                t_samples=T_SAMPLES):
+    """Bounds of the overlap rule's error at each node: ``(along the chords, across)``,
+    minimised over ``rhos``, with ``n_theta`` points per ellipse and the across-chord bound's
+    largest ``|f|`` taken at ``t_samples``."""
+    theta = np.linspace(0.0, 2.0 * np.pi, n_theta, endpoint=False)
     s = np.hypot(nx, ny)
     ex, ey = nx / s, ny / s
     xf, wf = gauss_legendre(n_phi, -1.0, 1.0)
@@ -91,25 +101,26 @@ def node_bounds(aberrations, field, nx, ny, n_phi, n_t):
             return np.asarray(d), sin_phi
 
         log_m = np.stack([np.max(-2 * np.pi * np.imag(
-            phase(xf[None, :, None] + 0j, _ellipse(rho)[None, None, :])[0]), axis=-1)
-            for rho in RHOS], axis=-1)
-        along = _gauss_bound(log_m, n_t)  # (nodes, n_phi)
+            phase(xf[None, :, None] + 0j, _ellipse(rho, theta)[None, None, :])[0]), axis=-1)
+            for rho in rhos], axis=-1)
+        along = _gauss_bound(log_m, n_t, rhos)  # (nodes, n_phi)
         sin_real = np.sin(phi_max[:, None] * (xf[None, :] + 1.0) / 2.0)
         along_total += ((phi_max[:, None] / 2.0) * sin_real**2 * along) @ wf
         log_m = []
-        for rho in RHOS:
-            d, sin_phi = phase(_ellipse(rho)[None, :, None], T_SAMPLES[None, None, :] + 0j)
+        for rho in rhos:
+            d, sin_phi = phase(_ellipse(rho, theta)[None, :, None],
+                               t_samples[None, None, :] + 0j)
             worst = np.max(-2 * np.pi * np.imag(d), axis=-1)
             log_m.append(np.max(np.log(phi_max[:, None] * np.abs(sin_phi[..., 0])**2)
                                 + worst, axis=-1))
-        across_total += _gauss_bound(np.stack(log_m, axis=-1), n_phi)
+        across_total += _gauss_bound(np.stack(log_m, axis=-1), n_phi, rhos)
     area = 4.0 * (((phi_max[:, None] / 2.0)
                    * np.sin(phi_max[:, None] * (xf[None, :] + 1.0) / 2.0)**2) @ wf)
     scale = np.asarray(_otf.diffraction_limited_otf(s)) / area
     return along_total * scale, across_total * scale
 
 
-def study(case) -> list[dict]:
+def study(case, sampling=None) -> list[dict]:
     aberrations, field, u, _, _ = case.arguments
     rng = np.random.default_rng(1)
     reach = min(0.999, u * math.sqrt(2.0))
@@ -121,7 +132,8 @@ def study(case) -> list[dict]:
     for order in ORDERS:
         h = np.asarray(_otf._otf_overlap(aberrations, nx, ny, field, order))
         true = np.abs(h - reference)
-        along, across = node_bounds(aberrations, float(field), nx, ny, *order)
+        along, across = node_bounds(aberrations, float(field), nx, ny, *order,
+                                    **(sampling or {}))
         bound = along + across
         resolved = true > FLOOR
         ratio = bound[resolved] / true[resolved]
@@ -136,12 +148,20 @@ def study(case) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    names = (argv if argv is not None else sys.argv[1:]) or list(CASES)
+    argv = list(argv if argv is not None else sys.argv[1:])
+    cheap = "--cheap" in argv
+    names = [a for a in argv if a != "--cheap"] or list(CASES)
+    sampling = CHEAP if cheap else None
     cases = {c.name: c for c in common.load_bank()}
     report = dict(machine=common.machine_info(), nodes=NODES, orders=ORDERS,
                   reference_order=REFERENCE_ORDER, rhos=RHOS.tolist(), rows=[])
     lines = ["# A Bernstein-ellipse bound of the overlap rule's error per node", "",
-             "`python benchmarks/overlap_error_bound.py`", "",
+             f"`python benchmarks/overlap_error_bound.py{' --cheap' if cheap else ''}`", "",
+             ("Sparse sampling: rho in " + str(CHEAP["rhos"].tolist()) + f", "
+              f"{CHEAP['n_theta']} points per ellipse, the across-chord bound's |f| at t in "
+              + str(CHEAP["t_samples"].tolist()) + "." if cheap else
+              f"rho in {RHOS.tolist()}, {len(THETA)} points per ellipse, the across-chord "
+              f"bound's |f| at {len(T_SAMPLES)} points along each chord."), "",
              f"Commit {report['machine'].get('commit')}. {NODES} random frequencies per case "
              f"in the band (up to min(sqrt(2) u, 0.999)); true error: `|H|` at the order "
              f"against order {REFERENCE_ORDER}; ratios over the nodes whose true error "
@@ -150,7 +170,7 @@ def main(argv=None) -> int:
              "chords) | bound / true: min | median | nodes below the true error |",
              "|---|---|---|---|---|---|---|"]
     for name in names:
-        for row in study(cases[name]):
+        for row in study(cases[name], sampling):
             report["rows"].append(row)
 
             def fmt(x, spec):
@@ -162,7 +182,7 @@ def main(argv=None) -> int:
                 f"| {fmt(row['ratio_min'], '.2g')} | {fmt(row['ratio_median'], '.2g')} | "
                 f"{row['below_true']} of {row['nodes_resolved']} |")
             print(lines[-1], flush=True)
-    common.write_report("overlap_error_bound", report, lines)
+    common.write_report("overlap_error_bound" + ("_cheap" if cheap else ""), report, lines)
     return 0
 
 

@@ -176,6 +176,11 @@ PROBE_OVERLAP = (24, 20)
 PROBE_FINE = (420, 56)
 
 
+#: The bound's sampling (None: ``overlap_error_bound``'s full one; ``--cheap-bound``: its
+#: ``CHEAP``).
+BOUND_SAMPLING = None
+
+
 def _overlap_bound(grid, arguments, value):
     """Relative bound of the first grid's overlap-rule error in the merit: the Bernstein-
     ellipse bound of ``|dH|`` at each coarse node (``overlap_error_bound.node_bounds``, at
@@ -202,7 +207,7 @@ def _overlap_bound(grid, arguments, value):
         w = weights[..., start:start + count].ravel()
         start += count
         along, across = overlap_error_bound.node_bounds(aberrations, float(field), x, y,
-                                                        *order)
+                                                        *order, **(BOUND_SAMPLING or {}))
         h = np.abs(np.asarray(_otf_overlap(aberrations, x, y, field, order)))
         s_x, s_n = np.asarray(signal(x, y)), np.asarray(noise(x, y))
         s_n = np.broadcast_to(s_n, s_x.shape)
@@ -286,18 +291,28 @@ def main() -> None:
     parser.add_argument("--probes", action="store_true",
                         help="the first grid kept by its estimate and two exact probes of "
                              "its overlap and fine-rule errors, without the check grid")
+    parser.add_argument("--cheap-bound", action="store_true",
+                        help="with --probes: the bound's sparse sampling "
+                             "(overlap_error_bound.CHEAP; writes ..._probes_cheap)")
     args_ = parser.parse_args()
     report = dict(machine=common.machine_info(), rows=[])
     if args_.probes:
+        global BOUND_SAMPLING
+        if args_.cheap_bound:
+            import overlap_error_bound
+
+            BOUND_SAMPLING = overlap_error_bound.CHEAP
         lines = ["# The shortcuts' check grid against exact probes of the first grid's "
-                 "errors", "", "`python benchmarks/recheck_shortcut.py --probes`", "",
+                 "errors", "", "`python benchmarks/recheck_shortcut.py --probes"
+                 + (" --cheap-bound" if args_.cheap_bound else "") + "`", "",
                  f"Commit {report['machine'].get('commit')}. Designs: the stored calibration "
                  "designs and converged bank cases each shortcut serves (one first grid, "
                  f"{jj.DEFAULT_TIERS[0][3].first}). Probes: the relative change of the first "
                  f"grid's value with overlap order {PROBE_OVERLAP} and with fine rule "
                  f"{PROBE_FINE}.", ""]
         report["rows"] = probes(lines)
-        common.write_report("recheck_shortcut_probes", report, lines)
+        common.write_report("recheck_shortcut_probes" + ("_cheap" if args_.cheap_bound
+                                                         else ""), report, lines)
         return
     command = " ".join(["python benchmarks/recheck_shortcut.py",
                         *(f'"{a}"' if " " in a else a for a in sys.argv[1:])])
