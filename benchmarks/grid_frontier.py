@@ -36,11 +36,12 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from accuracy_speed import _baseline, _in_float32, _jmse  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
 from jmse_jax import _merit  # noqa: E402
+from jmse_jax._numerics import common_dtype  # noqa: E402
 
 #: The family of fixed grids: each count drawn independently from its list.
 FAMILY = dict(
@@ -70,11 +71,7 @@ def sample_grids(samples: int, seed: int) -> list[dict]:
     attempts = 0
     while len(grids) < samples + 2 and attempts < 100 * samples:
         attempts += 1
-        pick = {k: int(rng.choice(v)) for k, v in FAMILY.items()}
-        floor = min(pick["floor"], pick["overlap_phi"], pick["overlap_t"])
-        grid = _grid_options((pick["radial"], pick["angular"]),
-                             (pick["se_radial"], pick["se_angular"]),
-                             (pick["overlap_phi"], pick["overlap_t"]), floor)
+        grid = _from_counts({k: int(rng.choice(v)) for k, v in FAMILY.items()})
         key = repr(sorted(grid.items()))
         if key not in seen:
             seen.add(key)
@@ -97,8 +94,8 @@ def _from_counts(c) -> dict:
 
 
 def neighbours(grid) -> list[dict]:
-    """The grids one step cheaper in one count (the next smaller value of ``FAMILY``, or
-    the value less one step of the family's spacing when the count lies outside it)."""
+    """The grids one step cheaper in one count: that count replaced by the largest value of
+    ``FAMILY`` below it (none where the family has no smaller value)."""
     out = []
     for key, c in _counts(grid).items():
         smaller = [v for v in FAMILY[key] if v < c]
@@ -115,30 +112,8 @@ def _label(grid) -> str:
 def _fn(dtype="float64", **options):
     """The merit with ``options``; in float32 its arguments are cast on entry and its value
     returned in float64 (errors are taken against the float64 reference)."""
-    def fn(aberrations, field, u, signal, noise):
-        return jj.jmse(aberrations, field, u, signal, noise, **options)
-
-    if dtype == "float64":
-        return fn
-    return _in_float32(fn)
-
-
-def _in_float32(fn):
-    def cast(tree):
-        return jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32), tree)
-
-    def wrapped(aberrations, field, u, signal, noise):
-        return fn(cast(aberrations), cast(field), cast(u), cast(signal),
-                  cast(noise)).astype(jnp.float64)
-
-    return wrapped
-
-
-def _baseline(B):
-    def fn(aberrations, field, u, signal, noise):
-        return jj.baseline_jmse(aberrations, field, u, signal, noise, B=B)
-
-    return fn
+    fn = _jmse(**options)
+    return fn if dtype == "float64" else _in_float32(fn)
 
 
 def pareto(rows) -> list[dict]:
@@ -182,9 +157,9 @@ def _default_parts():
     """The adaptive default's parts at a design its shortcut serves (``jmse_jax._merit``
     internals, value only): the first grid, the first grid with its interpolation-error
     estimate, the float32 check grid and the strength that picks the tier."""
-    options = jj.jmse_options("default")
-    first = {**options, **_merit._FIRST_GRID, "peaks": False}
-    check = {**options, **_merit._CHECK_GRID, "peaks": False}
+    # The shortcut of the Fig. 1 point's tier (1) as the default's plans hold it.
+    _, shortcut = _merit._tier_plans(jj.jmse_options(), jj.DEFAULT_TIERS)[1]
+    _, check, _, _, first, _ = shortcut
 
     def part(fn):
         def wrapped(aberrations, field, u, signal, noise):
@@ -193,7 +168,7 @@ def _default_parts():
         return wrapped
 
     def dtype_of(ops):
-        return jnp.result_type(*jax.tree_util.tree_leaves(ops))
+        return common_dtype(*ops)
 
     return [
         dict(name="default: first grid",

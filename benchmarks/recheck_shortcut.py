@@ -30,6 +30,7 @@ ellipse (``overlap_error_bound.py``; about 8 min more).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -41,6 +42,7 @@ import _common as common  # noqa: E402 - turns on float64
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+import overlap_error_bound  # noqa: E402
 import recheck_tiers  # noqa: E402
 from problems import PROBLEMS  # noqa: E402
 
@@ -49,9 +51,12 @@ from jmse_jax._merit import (  # noqa: E402
     _accepts,
     _compiled_estimated,
     _first_kept,
+    _panel_overlap_orders,
     _Static,
     _tier_index,
 )
+from jmse_jax._otf import _otf_overlap  # noqa: E402
+from jmse_jax._quadrature import polar_panels  # noqa: E402
 
 
 def _parse_grid(text: str) -> dict:
@@ -176,38 +181,23 @@ PROBE_OVERLAP = (24, 20)
 PROBE_FINE = (420, 56)
 
 
-#: The bound's sampling (None: ``overlap_error_bound``'s full one; ``--cheap-bound``: its
-#: ``CHEAP``).
-BOUND_SAMPLING = None
-
-
-def _overlap_bound(grid, arguments, value):
+def _overlap_bound(grid, arguments, value, sampling=None):
     """Relative bound of the first grid's overlap-rule error in the merit: the Bernstein-
     ellipse bound of ``|dH|`` at each coarse node (``overlap_error_bound.node_bounds``, at
-    the node's panel order) times ``|dS_e / d|H||`` there, summed with the coarse rule's
-    weights, over the merit ``value``."""
-    import math
-
-    import overlap_error_bound
-
-    from jmse_jax._otf import _otf_overlap
-    from jmse_jax._quadrature import polar_panels, radial_panel_sizes
-
+    the node's panel order; ``sampling``: its keyword arguments) times ``|dS_e / d|H||``
+    there, summed with the coarse rule's weights, over the merit ``value``."""
     aberrations, field, u, signal, noise = arguments
     coarse = polar_panels(u, *grid["nodes"], jnp.float64)
     nu_x, nu_y = np.asarray(coarse.nu_x), np.asarray(coarse.nu_y)
     weights = np.asarray(coarse.weights)
-    n_phi, n_t = grid["overlap_nodes"]
-    floor = grid["overlap_floor"]
     total, start = 0.0, 0
-    for count, t_max in radial_panel_sizes(nu_x.shape[-1]):
-        order = tuple(min(n, math.ceil(floor + (n - floor) * t_max)) for n in (n_phi, n_t))
+    for count, _, order in _panel_overlap_orders(grid, nu_x.shape[-1]):
         x = nu_x[..., start:start + count].ravel()
         y = nu_y[..., start:start + count].ravel()
         w = weights[..., start:start + count].ravel()
         start += count
         along, across = overlap_error_bound.node_bounds(aberrations, float(field), x, y,
-                                                        *order, **(BOUND_SAMPLING or {}))
+                                                        *order, **(sampling or {}))
         h = np.abs(np.asarray(_otf_overlap(aberrations, x, y, field, order)))
         s_x, s_n = np.asarray(signal(x, y)), np.asarray(noise(x, y))
         s_n = np.broadcast_to(s_n, s_x.shape)
@@ -216,7 +206,7 @@ def _overlap_bound(grid, arguments, value):
     return total / (2.0 * math.pi) / abs(value)
 
 
-def probes(lines) -> list[dict]:
+def probes(lines, sampling=None) -> list[dict]:
     """A rule without the check grid, with its probes at full cost.
 
     The first grid's error has three sources: the interpolation of the OTF from the coarse
@@ -242,8 +232,8 @@ def probes(lines) -> list[dict]:
         overlap = np.abs(_values({**first_grid, "overlap_nodes": PROBE_OVERLAP}, args)
                          / first - 1.0)
         fine = np.abs(_values({**first_grid, "se_nodes": PROBE_FINE}, args) / first - 1.0)
-        bound = np.asarray([_overlap_bound(first_grid, a, v) for a, v in zip(args, first,
-                                                                            strict=True)])
+        bound = np.asarray([_overlap_bound(first_grid, a, v, sampling)
+                            for a, v in zip(args, first, strict=True)])
         present = np.asarray(_first_kept(first, estimate, check, shortcut.rtol,
                                          shortcut.first_tol))
         rules = [("present: estimate <= 1e-5 and the check agrees to 1e-5", present)]
@@ -297,11 +287,6 @@ def main() -> None:
     args_ = parser.parse_args()
     report = dict(machine=common.machine_info(), rows=[])
     if args_.probes:
-        global BOUND_SAMPLING
-        if args_.cheap_bound:
-            import overlap_error_bound
-
-            BOUND_SAMPLING = overlap_error_bound.CHEAP
         lines = ["# The shortcuts' check grid against exact probes of the first grid's "
                  "errors", "", "`python benchmarks/recheck_shortcut.py --probes"
                  + (" --cheap-bound" if args_.cheap_bound else "") + "`", "",
@@ -310,7 +295,8 @@ def main() -> None:
                  f"{jj.DEFAULT_TIERS[0][3].first}). Probes: the relative change of the first "
                  f"grid's value with overlap order {PROBE_OVERLAP} and with fine rule "
                  f"{PROBE_FINE}.", ""]
-        report["rows"] = probes(lines)
+        report["rows"] = probes(lines, overlap_error_bound.CHEAP if args_.cheap_bound
+                                else None)
         common.write_report("recheck_shortcut_probes" + ("_cheap" if args_.cheap_bound
                                                          else ""), report, lines)
         return

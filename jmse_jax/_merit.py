@@ -362,6 +362,16 @@ def _otf_at(aberrations, nu_x, nu_y, field, options):
     return _otf_fft(aberrations, nu_x, nu_y, field, options["B"])
 
 
+def _panel_overlap_orders(options, n_radial: int) -> list[tuple[int, float, tuple[int, int]]]:
+    """``(nodes, t_max, overlap order)`` of each radial panel of a polar grid with
+    ``n_radial`` radial OTF nodes: ``n = floor + (n_full - floor) t_max`` per axis, at most
+    ``n_full`` (``_polar_otf``)."""
+    floor = options["overlap_floor"]
+    return [(count, t_max, tuple(min(n, math.ceil(floor + (n - floor) * t_max))
+                                 for n in options["overlap_nodes"]))
+            for count, t_max in radial_panel_sizes(n_radial)]
+
+
 def _polar_otf(aberrations, nu_x, nu_y, field, options):
     """OTF on the coarse polar nodes ``(2, n_angular, n_radial)``, panel by radial panel.
 
@@ -374,14 +384,8 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
     """
     if options["otf_method"] != "overlap":
         return _otf_at(aberrations, nu_x, nu_y, field, options)
-    n_phi, n_t = options["overlap_nodes"]
-    floor = options["overlap_floor"]
     parts, start = [], 0
-    for count, t_max in radial_panel_sizes(nu_x.shape[-1]):
-        order = tuple(
-            min(n, math.ceil(floor + (n - floor) * t_max))
-            for n in (n_phi, n_t)
-        )
+    for count, t_max, order in _panel_overlap_orders(options, nu_x.shape[-1]):
         stop = start + count
         parts.append(_otf_overlap(aberrations, nu_x[..., start:stop], nu_y[..., start:stop],
                                   field, order,
