@@ -42,6 +42,7 @@ import _common as common
 import jax
 import jax.numpy as jnp
 import numpy as np
+from overlap_error_bound import CASES, FLOOR, NODES, REFERENCE_ORDER, band_frequencies
 
 from jmse_jax._numerics import EXACT, common_dtype, materialise, safe_norm
 from jmse_jax._otf import (
@@ -216,22 +217,13 @@ def overlap_error_bound(aberrations, nu_x, nu_y, field, nodes, sampling=SAMPLING
 
 
 
-CASES = ("fig1", "hypercube_4", "hypercube_3", "coma_6", "hypercube_0", "all_5_field_0.8")
 ORDERS = ((18, 14), (14, 10))
-REFERENCE_ORDER = (64, 64)
-NODES = 300
-#: True errors below this are rounding; they are left out of the ratios.
-FLOOR = 1e-12
 
 
 def tightness(case, order, sampling) -> dict:
     """The bound over the true error at ``NODES`` random band frequencies of ``case``."""
     aberrations, field, u, _, _ = case.arguments
-    rng = np.random.default_rng(1)
-    reach = min(0.999, u * math.sqrt(2.0))
-    r = reach * np.sqrt(rng.uniform(0.01, 1.0, NODES))
-    theta = rng.uniform(0.0, 2.0 * math.pi, NODES)
-    nx, ny = r * np.cos(theta), r * np.sin(theta)
+    nx, ny = band_frequencies(u)
     reference = np.asarray(_otf_overlap(aberrations, nx, ny, field, REFERENCE_ORDER))
     true = np.abs(np.asarray(_otf_overlap(aberrations, nx, ny, field, order)) - reference)
     bound = np.asarray(overlap_error_bound(aberrations, nx, ny, field, order, sampling))

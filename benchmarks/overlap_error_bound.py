@@ -120,13 +120,19 @@ def node_bounds(aberrations, field, nx, ny, n_phi, n_t, rhos=RHOS, n_theta=N_THE
     return along_total * scale, across_total * scale
 
 
-def study(case, sampling=None) -> list[dict]:
-    aberrations, field, u, _, _ = case.arguments
+def band_frequencies(u, nodes=NODES):
+    """``nodes`` random frequencies ``(nu_x, nu_y)`` spread over the band of ``u`` (up to
+    ``min(sqrt(2) u, 0.999)``), the same for every call."""
     rng = np.random.default_rng(1)
     reach = min(0.999, u * math.sqrt(2.0))
-    r = reach * np.sqrt(rng.uniform(0.01, 1.0, NODES))
-    theta = rng.uniform(0.0, 2.0 * math.pi, NODES)
-    nx, ny = r * np.cos(theta), r * np.sin(theta)
+    r = reach * np.sqrt(rng.uniform(0.01, 1.0, nodes))
+    theta = rng.uniform(0.0, 2.0 * math.pi, nodes)
+    return r * np.cos(theta), r * np.sin(theta)
+
+
+def study(case, sampling=None) -> list[dict]:
+    aberrations, field, u, _, _ = case.arguments
+    nx, ny = band_frequencies(u)
     reference = np.asarray(_otf._otf_overlap(aberrations, nx, ny, field, REFERENCE_ORDER))
     rows = []
     for order in ORDERS:
