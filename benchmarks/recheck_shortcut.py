@@ -25,6 +25,13 @@ Prints its tables and writes ``results/recheck_shortcut.json`` and ``.md``.
 from the first grid itself (``probes``; writes ``results/recheck_shortcut_probes.*``), with
 the overlap rule's error either measured exactly or bounded per node from the Bernstein
 ellipse (``overlap_error_bound.py``; about 8 min more).
+
+``--panel-ends`` asks whether a cheap probe of the overlap rule's error can stand in for the
+exact one (``panel_ends``; writes ``results/recheck_shortcut_panel_ends.*``, about 4 min):
+``|dH|``, the change of the first grid's OTF when each panel's overlap order grows by the
+exact probe's factors, taken at a few coarse nodes only and carried to the merit as their
+largest ``|dH|`` times the sum of ``w |dS_e/d|H||`` over all coarse nodes. It also times
+that probe's OTF at the Fig. 1 point.
 """
 
 from __future__ import annotations
@@ -47,6 +54,7 @@ import recheck_tiers  # noqa: E402
 from problems import PROBLEMS  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
+from jmse_jax import _merit  # noqa: E402
 from jmse_jax._merit import (  # noqa: E402
     _accepts,
     _compiled_estimated,
@@ -270,6 +278,114 @@ def probes(lines, sampling=None) -> list[dict]:
     return rows
 
 
+def _overlap_changes(grid, arguments):
+    """Per coarse node of ``grid``: ``w |dS_e/d|H||`` and ``|dH|``, the change of the OTF
+    when each radial panel's overlap order grows by ``PROBE_OVERLAP / overlap_nodes`` per
+    axis (``(2, n_angular, n_radial)`` each), and the index of each panel's last node."""
+    aberrations, field, u, signal, noise = arguments
+    coarse = polar_panels(u, *grid["nodes"], jnp.float64)
+    nu_x, nu_y = np.asarray(coarse.nu_x), np.asarray(coarse.nu_y)
+    weights = np.asarray(coarse.weights)
+    scale = [p / n for p, n in zip(PROBE_OVERLAP, grid["overlap_nodes"], strict=True)]
+    terms, changes, ends, start = [], [], [], 0
+    for count, _, order in _panel_overlap_orders(grid, nu_x.shape[-1]):
+        x, y = nu_x[..., start:start + count], nu_y[..., start:start + count]
+        w = weights[..., start:start + count]
+        start += count
+        ends.append(start - 1)
+        probe = tuple(math.ceil(o * f) for o, f in zip(order, scale, strict=True))
+        h = np.asarray(_otf_overlap(aberrations, x, y, field, order))
+        changes.append(np.abs(np.asarray(_otf_overlap(aberrations, x, y, field, probe)) - h))
+        s_x = np.asarray(signal(x, y))
+        s_n = np.broadcast_to(np.asarray(noise(x, y)), s_x.shape)
+        a = np.abs(h)
+        terms.append(w * 2.0 * a * s_x**2 * s_n / (s_x * a**2 + s_n) ** 2)
+    return np.concatenate(terms, axis=-1), np.concatenate(changes, axis=-1), ends
+
+
+#: The cheap probes of ``panel_ends``: which coarse nodes' ``|dH|`` they take.
+SUBSETS = {
+    "every node, sum of w |dS_e/d|H|| |dH|": None,
+    "each panel's last node per row, largest |dH| x sum w |dS_e/d|H||": "panel ends",
+    "the last node per row, largest |dH| x sum w |dS_e/d|H||": "last",
+}
+
+
+def _probe_time(grid):
+    """Warm time of the panel-end probe's OTF (the nodes of ``SUBSETS['panel ends']`` at the
+    probe orders) at the Fig. 1 point, against the first grid's whole coarse OTF."""
+    aberrations = jj.Seidel(**common.FIG1)
+    coarse = polar_panels(common.FIG1_U, *grid["nodes"], jnp.float64)
+    scale = [p / n for p, n in zip(PROBE_OVERLAP, grid["overlap_nodes"], strict=True)]
+    panels, start = [], 0
+    for count, _, order in _panel_overlap_orders(grid, coarse.nu_x.shape[-1]):
+        start += count
+        panels.append((start - 1, order,
+                       tuple(math.ceil(o * f) for o, f in zip(order, scale, strict=True))))
+    field = common.FIG1_FIELD
+
+    def probe(a, x, y):
+        return [_otf_overlap(a, x[..., end], y[..., end], field, order)
+                for end, _, order in panels]
+
+    def first(a, x, y):
+        return _merit._polar_otf(a, x, y, field, {**jj.jmse_options(), **grid})
+
+    args = (aberrations, coarse.nu_x, coarse.nu_y)
+    return {name: common.time_compiled(fn, args, max_repeats=31)["warm_s"]
+            for name, fn in (("probe", probe), ("first", first))}
+
+
+def panel_ends(lines) -> list[dict]:
+    """The first grid kept by its estimate, the fine probe and a cheap overlap probe."""
+    rows = []
+    lines += ["| tier | designs | overlap measure | measure / exact probe (min, median) | "
+              "kept at tolerance 1e-6 / 1e-5 / 1e-4 / none (worst kept) |",
+              "|---|---|---|---|---|"]
+    for tier, (_, _, _, shortcut) in enumerate(jj.DEFAULT_TIERS):
+        if shortcut is None or shortcut.first is None:
+            continue
+        names, args, refs = _served(tier)
+        first_grid = shortcut.first
+        options = {**jj.jmse_options(), **first_grid}
+        first = _values(first_grid, args)
+        error = np.abs(first / refs - 1.0)
+        estimate = _estimates(first_grid, args)
+        overlap = np.abs(_values({**first_grid, "overlap_nodes": PROBE_OVERLAP}, args)
+                         / first - 1.0)
+        fine = np.abs(_values({**first_grid, "se_nodes": PROBE_FINE}, args) / first - 1.0)
+        measures = {"exact probe": overlap, **{k: [] for k in SUBSETS}}
+        for a, v in zip(args, first, strict=True):
+            terms, changes, ends = _overlap_changes(options, a)
+            total = np.sum(terms) / (2.0 * math.pi) / abs(v)
+            for text, subset in SUBSETS.items():
+                if subset is None:
+                    measures[text].append(np.sum(terms * changes) / (2.0 * math.pi) / abs(v))
+                else:
+                    nodes = ends if subset == "panel ends" else ends[-1:]
+                    measures[text].append(np.max(changes[..., nodes]) * total)
+        resolved = overlap > 1e-12
+        for text, measure in measures.items():
+            measure = np.asarray(measure)
+            ratio = measure[resolved] / overlap[resolved]
+            cells = []
+            for tol in (1e-6, 1e-5, 1e-4, math.inf):
+                kept = (estimate <= 5e-6) & (fine <= 1e-6) & (measure <= tol)
+                cells.append(f"{int(kept.sum())} ({_worst(error, kept):.1e})")
+                rows.append(dict(tier=tier, designs=len(names), measure=text, tol=tol,
+                                 kept=int(kept.sum()), worst_kept=_worst(error, kept)))
+            lines.append(f"| {tier} | {len(names)} | {text} | {ratio.min():.3g}, "
+                         f"{np.median(ratio):.3g} | {' / '.join(cells)} |")
+            print(lines[-1], flush=True)
+    times = _probe_time(jj.DEFAULT_TIERS[0][3].first)
+    rows.append(dict(times=times))
+    lines += ["", f"At the Fig. 1 point (one process; run under `taskset -c 1` for one core) "
+              f"the panel-end probe's OTF takes {times['probe'] * 1e6:.0f} us, the first "
+              f"grid's whole coarse OTF {times['first'] * 1e6:.0f} us."]
+    print(lines[-1], flush=True)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--first", nargs="*", default=[],
@@ -284,8 +400,25 @@ def main() -> None:
     parser.add_argument("--cheap-bound", action="store_true",
                         help="with --probes: the bound's sparse sampling "
                              "(overlap_error_bound.CHEAP; writes ..._probes_cheap)")
+    parser.add_argument("--panel-ends", action="store_true",
+                        help="the first grid kept by its estimate, the fine probe and cheap "
+                             "probes of its overlap error at a few coarse nodes")
     args_ = parser.parse_args()
     report = dict(machine=common.machine_info(), rows=[])
+    if args_.panel_ends:
+        lines = ["# A cheap probe of the first grid's overlap error", "",
+                 "`python benchmarks/recheck_shortcut.py --panel-ends`", "",
+                 f"Commit {report['machine'].get('commit')}. Designs as for `--probes`. The "
+                 "first grid is kept when its interpolation-error estimate is <= 5e-6, the "
+                 f"fine probe (its value's change with fine rule {PROBE_FINE}) <= 1e-6 and "
+                 "the overlap measure <= the tolerance. Measures: the exact probe (its value's "
+                 f"change with overlap order {PROBE_OVERLAP}), and the first-order change "
+                 "`sum w |dS_e/d|H|| |dH|` over the coarse nodes, or its bound from a few "
+                 "nodes, with `|dH|` the OTF's change when each panel's overlap order grows "
+                 "by the same factors.", ""]
+        report["rows"] = panel_ends(lines)
+        common.write_report("recheck_shortcut_panel_ends", report, lines)
+        return
     if args_.probes:
         lines = ["# The shortcuts' check grid against exact probes of the first grid's "
                  "errors", "", "`python benchmarks/recheck_shortcut.py --probes"
