@@ -190,6 +190,27 @@ PROBE_OVERLAP = (24, 20)
 PROBE_FINE = (420, 56)
 
 
+def _panels(grid, n_radial):
+    """``(start, stop, order, probe order)`` of each radial panel of ``grid``: its slice of
+    the radial nodes, its overlap order (``_panel_overlap_orders``) and that order grown by
+    the exact probe's factors ``PROBE_OVERLAP / overlap_nodes`` per axis."""
+    scale = [p / n for p, n in zip(PROBE_OVERLAP, grid["overlap_nodes"], strict=True)]
+    panels, start = [], 0
+    for count, _, order in _panel_overlap_orders(grid, n_radial):
+        probe = tuple(math.ceil(o * f) for o, f in zip(order, scale, strict=True))
+        panels.append((start, start + count, order, probe))
+        start += count
+    return panels
+
+
+def _weighted_sensitivity(weights, h, signal, noise, x, y):
+    """``w |dS_e / d|H||`` at nodes ``(x, y)`` with coarse weights ``w`` and OTF ``h``."""
+    s_x = np.asarray(signal(x, y))
+    s_n = np.broadcast_to(np.asarray(noise(x, y)), s_x.shape)
+    a = np.abs(h)
+    return weights * 2.0 * a * s_x**2 * s_n / (s_x * a**2 + s_n) ** 2
+
+
 def _overlap_bound(grid, arguments, value, sampling=None):
     """Relative bound of the first grid's overlap-rule error in the merit: the Bernstein-
     ellipse bound of ``|dH|`` at each coarse node (``overlap_error_bound.node_bounds``, at
@@ -199,19 +220,14 @@ def _overlap_bound(grid, arguments, value, sampling=None):
     coarse = polar_panels(u, *grid["nodes"], jnp.float64)
     nu_x, nu_y = np.asarray(coarse.nu_x), np.asarray(coarse.nu_y)
     weights = np.asarray(coarse.weights)
-    total, start = 0.0, 0
-    for count, _, order in _panel_overlap_orders(grid, nu_x.shape[-1]):
-        x = nu_x[..., start:start + count].ravel()
-        y = nu_y[..., start:start + count].ravel()
-        w = weights[..., start:start + count].ravel()
-        start += count
+    total = 0.0
+    for start, stop, order, _ in _panels(grid, nu_x.shape[-1]):
+        x, y = nu_x[..., start:stop].ravel(), nu_y[..., start:stop].ravel()
         along, across = overlap_error_bound.node_bounds(aberrations, float(field), x, y,
                                                         *order, **(sampling or {}))
-        h = np.abs(np.asarray(_otf_overlap(aberrations, x, y, field, order)))
-        s_x, s_n = np.asarray(signal(x, y)), np.asarray(noise(x, y))
-        s_n = np.broadcast_to(s_n, s_x.shape)
-        sensitivity = 2.0 * h * s_x**2 * s_n / (s_x * h**2 + s_n) ** 2
-        total += float(np.sum(w * sensitivity * (along + across)))
+        h = np.asarray(_otf_overlap(aberrations, x, y, field, order))
+        terms = _weighted_sensitivity(weights[..., start:stop].ravel(), h, signal, noise, x, y)
+        total += float(np.sum(terms * (along + across)))
     return total / (2.0 * math.pi) / abs(value)
 
 
@@ -281,26 +297,19 @@ def probes(lines, sampling=None) -> list[dict]:
 
 def _overlap_changes(grid, arguments):
     """Per coarse node of ``grid``: ``w |dS_e/d|H||`` and ``|dH|``, the change of the OTF
-    when each radial panel's overlap order grows by ``PROBE_OVERLAP / overlap_nodes`` per
-    axis (``(2, n_angular, n_radial)`` each), and the index of each panel's last node."""
+    from each panel's order to its probe order (``_panels``; ``(2, n_angular, n_radial)``
+    each), and the index of each panel's last node."""
     aberrations, field, u, signal, noise = arguments
     coarse = polar_panels(u, *grid["nodes"], jnp.float64)
     nu_x, nu_y = np.asarray(coarse.nu_x), np.asarray(coarse.nu_y)
     weights = np.asarray(coarse.weights)
-    scale = [p / n for p, n in zip(PROBE_OVERLAP, grid["overlap_nodes"], strict=True)]
-    terms, changes, ends, start = [], [], [], 0
-    for count, _, order in _panel_overlap_orders(grid, nu_x.shape[-1]):
-        x, y = nu_x[..., start:start + count], nu_y[..., start:start + count]
-        w = weights[..., start:start + count]
-        start += count
-        ends.append(start - 1)
-        probe = tuple(math.ceil(o * f) for o, f in zip(order, scale, strict=True))
+    terms, changes, ends = [], [], []
+    for start, stop, order, probe in _panels(grid, nu_x.shape[-1]):
+        x, y = nu_x[..., start:stop], nu_y[..., start:stop]
         h = np.asarray(_otf_overlap(aberrations, x, y, field, order))
         changes.append(np.abs(np.asarray(_otf_overlap(aberrations, x, y, field, probe)) - h))
-        s_x = np.asarray(signal(x, y))
-        s_n = np.broadcast_to(np.asarray(noise(x, y)), s_x.shape)
-        a = np.abs(h)
-        terms.append(w * 2.0 * a * s_x**2 * s_n / (s_x * a**2 + s_n) ** 2)
+        terms.append(_weighted_sensitivity(weights[..., start:stop], h, signal, noise, x, y))
+        ends.append(stop - 1)
     return np.concatenate(terms, axis=-1), np.concatenate(changes, axis=-1), ends
 
 
@@ -320,17 +329,12 @@ def _probe_time(grid):
     probe orders) at the Fig. 1 point, against the first grid's whole coarse OTF."""
     aberrations = jj.Seidel(**common.FIG1)
     coarse = polar_panels(common.FIG1_U, *grid["nodes"], jnp.float64)
-    scale = [p / n for p, n in zip(PROBE_OVERLAP, grid["overlap_nodes"], strict=True)]
-    panels, start = [], 0
-    for count, _, order in _panel_overlap_orders(grid, coarse.nu_x.shape[-1]):
-        start += count
-        panels.append((start - 1, order,
-                       tuple(math.ceil(o * f) for o, f in zip(order, scale, strict=True))))
+    panels = _panels(grid, coarse.nu_x.shape[-1])
     field = common.FIG1_FIELD
 
     def probe(a, x, y):
-        return [_otf_overlap(a, x[..., end], y[..., end], field, order)
-                for end, _, order in panels]
+        return [_otf_overlap(a, x[..., stop - 1], y[..., stop - 1], field, probe_order)
+                for _, stop, _, probe_order in panels]
 
     def first(a, x, y):
         return _merit._polar_otf(a, x, y, field, {**jj.jmse_options(), **grid})
