@@ -122,6 +122,14 @@ def machine_info() -> dict:
     )
 
 
+def machine_line(machine: dict, load_at_end: dict) -> str:
+    """One sentence for a report's heading: CPU, CPUs used, jax, dtype, commit, date, load."""
+    m = machine
+    return (f"{m['cpu_model']}, {m['nproc']} CPU(s) used, jax {m['jax_version']}, "
+            f"{m['dtype']}, commit `{m['commit'][:10]}`, {m['date']}. Load average at start "
+            f"{m['load_at_start']['load_1min']:.2f}, at end {load_at_end['load_1min']:.2f}.")
+
+
 def _jaxlib_version():
     try:
         import jaxlib

@@ -202,11 +202,9 @@ def components_markdown(report) -> str:
     lines = [
         f"# The default's parts at `{report['problem']}`",
         "",
-        f"{m['cpu_model']}, {m['nproc']} CPU(s) used, jax {m['jax_version']}, {m['dtype']}, "
-        f"commit `{m['commit'][:10]}`, {m['date']}. Load average at start "
-        f"{m['load_at_start']['load_1min']:.2f}, at end "
-        f"{report['load_at_end']['load_1min']:.2f}. Alternated, {report['rounds']} rounds "
-        f"of {report['calls']} calls: medians (fastest).",
+        common.machine_line(m, report["load_at_end"])
+        + f" Alternated, {report['rounds']} rounds of {report['calls']} calls: medians "
+        "(fastest).",
         "",
         "| program | value | value_and_grad |",
         "|---|---|---|",

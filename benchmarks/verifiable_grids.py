@@ -91,12 +91,9 @@ def time_candidates(problem: str, rows, rounds: int, calls: int) -> list[dict]:
 
 
 def markdown(report) -> str:
-    m = report["machine"]
     lines = [
         "# 1e-4-class grids at the Fig. 1 point, and what would verify them", "",
-        f"{m['cpu_model']}, {m['nproc']} CPU(s) used, jax {m['jax_version']}, {m['dtype']}, "
-        f"commit `{m['commit'][:10]}`, {m['date']}. Load average at start "
-        f"{m['load_at_start']['load_1min']:.2f}, at end {report['load_at_end']['load_1min']:.2f}.",
+        common.machine_line(report["machine"], report["load_at_end"]),
         "", "Error against the converged reference; the grid's interpolation-error estimate; "
         f"the exact overlap probe (order {recheck_shortcut.PROBE_OVERLAP}); the fine probe "
         "(`se_nodes` x 1.4). A rule without the check grid keeps a grid when the three are "
