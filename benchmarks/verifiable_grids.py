@@ -35,6 +35,7 @@ sys.path.insert(0, str(HERE.parent / "tests"))
 import _common as common  # noqa: E402 - turns on float64
 import grid_frontier  # noqa: E402
 import recheck_shortcut  # noqa: E402
+from grid_frontier import _label  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
 
@@ -47,13 +48,7 @@ OVERLAPS = (((14, 12), 6), ((16, 12), 8))
 SUM_TOL = 5e-5
 
 
-def _label(grid) -> str:
-    return (f"{grid['nodes']} / {grid['se_nodes']} / {grid['overlap_nodes']}, "
-            f"{grid['overlap_floor']}")
-
-
-def measure(problem: str) -> list[dict]:
-    case = {c.name: c for c in common.load_bank()}[problem]
+def measure(case) -> list[dict]:
     args = case.arguments
     rows = []
     for nodes, se, (overlap, floor) in itertools.product(NODES, SE_NODES, OVERLAPS):
@@ -65,19 +60,18 @@ def measure(problem: str) -> list[dict]:
         fine_se = (round(se[0] * 1.4), round(se[1] * 1.4))
         fine_probe = abs(recheck_shortcut._values({**grid, "se_nodes": fine_se}, [args])[0]
                          / value - 1)
-        row = dict(grid=grid, label=_label(grid), error=abs(value / case.reference - 1),
+        row = dict(grid=grid, error=abs(value / case.reference - 1),
                    estimate=estimate, overlap_probe=float(overlap_probe),
                    fine_probe=float(fine_probe))
         row["sum"] = row["estimate"] + row["overlap_probe"] + row["fine_probe"]
         row["error_over_sum"] = row["error"] / row["sum"]
         rows.append(row)
-        print(f"{row['label']}: error {row['error']:.1e}, estimate {estimate:.1e}, overlap "
-              f"{overlap_probe:.1e}, fine {fine_probe:.1e}", flush=True)
+        print(f"{_label(grid)}: error {row['error']:.1e}, estimate {estimate:.1e}, "
+              f"overlap {overlap_probe:.1e}, fine {fine_probe:.1e}", flush=True)
     return rows
 
 
-def time_candidates(problem: str, rows, rounds: int, calls: int) -> list[dict]:
-    case = {c.name: c for c in common.load_bank()}[problem]
+def time_candidates(case, rows, rounds: int, calls: int) -> list[dict]:
     seen, entries = set(), [dict(name="baseline B=64", fn=grid_frontier._baseline(64)),
                             dict(name="preset default", fn=grid_frontier._fn())]
     # The fine rule does not matter at this design (fine probe ~1e-14): time the smaller.
@@ -85,7 +79,8 @@ def time_candidates(problem: str, rows, rounds: int, calls: int) -> list[dict]:
         key = (row["grid"]["nodes"], row["grid"]["overlap_nodes"])
         if row["sum"] <= SUM_TOL and row["grid"]["se_nodes"] == SE_NODES[0] and key not in seen:
             seen.add(key)
-            entries.append(dict(name=row["label"], fn=grid_frontier._fn(**row["grid"])))
+            entries.append(dict(name=_label(row["grid"]),
+                                fn=grid_frontier._fn(**row["grid"])))
     grid_frontier.alternate(entries, case.arguments, rounds, calls)
     return [{k: v for k, v in e.items() if k != "fn"} for e in entries]
 
@@ -98,10 +93,10 @@ def markdown(report) -> str:
         f"the exact overlap probe (order {recheck_shortcut.PROBE_OVERLAP}); the fine probe "
         "(`se_nodes` x 1.4). A rule without the check grid keeps a grid when the three are "
         "small, so the error must stay within a known factor of their sum.", "",
-        "| grid (nodes / se_nodes / overlap, floor) | error | estimate | overlap probe | "
+        "| grid (nodes / se_nodes / overlap floor) | error | estimate | overlap probe | "
         "fine probe | error / sum |", "|---|---|---|---|---|---|"]
     for r in report["grids"]:
-        lines.append(f"| {r['label']} | {r['error']:.1e} | {r['estimate']:.1e} | "
+        lines.append(f"| {_label(r['grid'])} | {r['error']:.1e} | {r['estimate']:.1e} | "
                      f"{r['overlap_probe']:.1e} | {r['fine_probe']:.1e} | "
                      f"{r['error_over_sum']:.2f} |")
     lines += ["", f"Grids with estimate + probes <= {SUM_TOL:.0e}, timed in alternation with "
@@ -127,12 +122,12 @@ def main():
     parser.add_argument("--calls", type=int, default=5)
     a = parser.parse_args()
     info = common.machine_info()
-    grids = measure(a.problem)
-    times = time_candidates(a.problem, grids, a.rounds, a.calls)
+    case = {c.name: c for c in common.load_bank()}[a.problem]
+    grids = measure(case)
+    times = time_candidates(case, grids, a.rounds, a.calls)
     report = dict(machine=info, problem=a.problem, grids=grids, times=times, rounds=a.rounds,
                   calls=a.calls, sum_tol=SUM_TOL, load_at_end=common.load_average(),
-                  strength=float(jj.aberration_strength(
-                      *{c.name: c for c in common.load_bank()}[a.problem].arguments[:3])))
+                  strength=float(jj.aberration_strength(*case.arguments[:3])))
     stem = common.RESULTS / "verifiable_grids"
     stem.with_suffix(".json").write_text(json.dumps(report, indent=2))
     stem.with_suffix(".md").write_text(markdown(report))
