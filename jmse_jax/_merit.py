@@ -385,13 +385,14 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
     if options["otf_method"] != "overlap":
         return _otf_at(aberrations, nu_x, nu_y, field, options)
     parts, start = [], 0
-    for count, t_max, order in _panel_overlap_orders(options, nu_x.shape[-1]):
-        stop = start + count
-        parts.append(_otf_overlap(aberrations, nu_x[..., start:stop], nu_y[..., start:stop],
-                                  field, order,
-                                  remat=options.get("_remat_otf", False) and t_max < 1))
-        start = stop
-    return jnp.concatenate(parts, axis=-1)
+    with jax.named_scope("coarse_otf"):
+        for count, t_max, order in _panel_overlap_orders(options, nu_x.shape[-1]):
+            stop = start + count
+            parts.append(_otf_overlap(aberrations, nu_x[..., start:stop],
+                                      nu_y[..., start:stop], field, order,
+                                      remat=options.get("_remat_otf", False) and t_max < 1))
+            start = stop
+        return jnp.concatenate(parts, axis=-1)
 
 
 #: Fine S_e nodes per block of angular rows (see ``_fine_blocks``).
@@ -478,6 +479,7 @@ def _fine_parts(h, l_a, l_a_t, u, signal, noise, n_r, n_a, angles, dtype, adjoin
     return value, jnp.stack(back, axis=1).reshape(l_a_t.shape[0], 2, 2, n_r)
 
 
+@jax.named_scope("fine_se")
 def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(0, 0),
                 ridges=False):
     """``\\iint S_e`` on the ``fine`` polar grid, ``H`` interpolated from the ``coarse`` one;
@@ -628,9 +630,10 @@ def _interpolation_estimate(h, u, signal, noise, total, options, dtype, ridges):
     gradient), each with the closed-form peaks (``ridges``) if the total has them."""
     nodes, se_nodes = options["nodes"], options["se_nodes"]
     h, u, signal, noise, total = jax.lax.stop_gradient((h, u, signal, noise, total))
-    change = [jnp.abs(_fine_total(h, u, signal, noise, nodes, se_nodes, dtype, False, drop,
-                                  ridges) - total) for drop in _ESTIMATE_DROP]
-    return functools.reduce(jnp.maximum, change) / jnp.abs(total)
+    with jax.named_scope("interpolation_estimate"):
+        change = [jnp.abs(_fine_total(h, u, signal, noise, nodes, se_nodes, dtype, False,
+                                      drop, ridges) - total) for drop in _ESTIMATE_DROP]
+        return functools.reduce(jnp.maximum, change) / jnp.abs(total)
 
 
 #: The lowered interpolants of ``_interpolation_estimate``: one Legendre degree fewer in
@@ -650,6 +653,7 @@ _SLOPE_RADII = np.linspace(0.05, 1.0, 12)
 _SLOPE_ANGLES = np.linspace(0.0, 2.0 * math.pi, 24, endpoint=False)
 
 
+@jax.named_scope("strength")
 def _strength(aberrations, field, u):
     """``aberration_strength`` without validation (traceable; no gradient flows)."""
     aberrations, field, u = jax.lax.stop_gradient((aberrations.without_tilt(), field, u))
@@ -907,7 +911,8 @@ def _check_value(check_grid, dtype, operands):
     1e38 or below 1e-45) make the check non-finite, which refuses the trial: the tier's own
     grid, in the merit's dtype, then gives the value.
     """
-    return _apply_merit(check_grid, _CHECK_DTYPE, _in_check_dtype(operands)).astype(dtype)
+    with jax.named_scope("check_grid"):
+        return _apply_merit(check_grid, _CHECK_DTYPE, _in_check_dtype(operands)).astype(dtype)
 
 
 def _eligible(operands, u_max):
