@@ -68,14 +68,28 @@ def _programs(baseline_b: int):
 
 
 def _instructions(hlo_text: str) -> dict[str, tuple[str, str]]:
-    """``{instruction name: (opcode, its op_name metadata)}`` from compiled HLO text."""
-    out = {}
+    """``{instruction name: (opcode, its op_name metadata)}`` from compiled HLO text.
+
+    Instructions that XLA's passes created without metadata (the dots it forms from
+    contractions, for one) take their first operand's, up to a few producers back."""
+    found, operands = {}, {}
     for line in hlo_text.splitlines():
         match = _INSTRUCTION.match(line)
-        if match and match.group(1) not in out:
+        if match and match.group(1) not in found:
             meta = re.search(r'op_name="([^"]*)"', line)
-            out[match.group(1)] = (match.group(2), meta.group(1) if meta else "")
-    return out
+            found[match.group(1)] = (match.group(2), meta.group(1) if meta else "")
+            arguments = line[match.end():].split(")", 1)[0]
+            operands[match.group(1)] = re.findall(r"%([\w.\-]+)", arguments)
+
+    def op_name(name, depth=4):
+        if found[name][1] or depth == 0:
+            return found[name][1]
+        for operand in operands[name]:
+            if operand in found and (inherited := op_name(operand, depth - 1)):
+                return inherited
+        return ""
+
+    return {name: (opcode, op_name(name)) for name, (opcode, _) in found.items()}
 
 
 def _stage(op_name: str) -> str:
