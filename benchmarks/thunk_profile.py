@@ -28,10 +28,10 @@ import argparse
 import collections
 import gzip
 import json
+import math
 import re
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -132,19 +132,14 @@ def _exclusive_times(events) -> list[float]:
 
 
 def profile(fn, args, calls: int, with_stages: bool) -> dict:
-    compiled = jax.jit(fn).lower(*args).compile()
+    timing = common.time_compiled(fn, args, budget_s=math.inf, max_repeats=calls,
+                                  min_repeats=calls)
+    compiled = timing["compiled"]
     instructions = _instructions(compiled.as_text())
     stages = {_stage(op_name) for _, op_name in instructions.values()}
     if with_stages and "coarse OTF" not in stages:
         raise RuntimeError("no thunk carries the library's `coarse_otf` scope: have the named "
                            "scopes in jmse_jax/_merit.py changed? Update _stage to match.")
-    for _ in range(20):
-        jax.block_until_ready(compiled(*args))
-    untraced = []
-    for _ in range(calls):
-        start = time.perf_counter()
-        jax.block_until_ready(compiled(*args))
-        untraced.append(time.perf_counter() - start)
     with tempfile.TemporaryDirectory() as folder:
         jax.profiler.start_trace(folder)
         for _ in range(calls):
@@ -164,7 +159,7 @@ def profile(fn, args, calls: int, with_stages: bool) -> dict:
         count_stage[_stage(op_name)] += 1 / calls
         by_kind[_kind(name, opcode)] += share / calls
     return dict(
-        untraced_min_us=min(untraced) * 1e6,
+        untraced_min_us=timing["warm_min_s"] * 1e6,
         busy_us=sum(shares) / calls,
         thunks_per_call=len(leaves) / calls,
         leaf_thunks_in_program=sum(1 for op, _ in instructions.values()
@@ -176,8 +171,7 @@ def profile(fn, args, calls: int, with_stages: bool) -> dict:
 
 def _lines(report: dict) -> list[str]:
     lines = ["# Where one warm call's time goes (XLA thunk trace)", "",
-             "Fig. 1 point, " + common.machine_line(report["machine"],
-                                                     report["machine"]["load_at_end"]),
+             "Fig. 1 point, " + common.machine_line(report["machine"], report["load_at_end"]),
              f"{report['calls']} traced calls per program (`benchmarks/thunk_profile.py`); "
              "overlapping thunks share each instant, so the stage times add up to the busy "
              "time. The untraced time is the fastest of as many calls without the profiler.",
@@ -205,7 +199,7 @@ def main(argv=None):
     for label, (fn, ab) in _programs(args.baseline_b).items():
         report["programs"][label] = profile(fn, (ab,), args.calls, label.startswith("default"))
         print(label, f"{report['programs'][label]['untraced_min_us']:.0f} us", flush=True)
-    report["machine"]["load_at_end"] = common.load_average()
+    report["load_at_end"] = common.load_average()
     common.write_report("thunk_profile", report, _lines(report))
 
 

@@ -372,6 +372,7 @@ def _panel_overlap_orders(options, n_radial: int) -> list[tuple[int, float, tupl
             for count, t_max in radial_panel_sizes(n_radial)]
 
 
+@jax.named_scope("coarse_otf")
 def _polar_otf(aberrations, nu_x, nu_y, field, options):
     """OTF on the coarse polar nodes ``(2, n_angular, n_radial)``, panel by radial panel.
 
@@ -385,14 +386,13 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
     if options["otf_method"] != "overlap":
         return _otf_at(aberrations, nu_x, nu_y, field, options)
     parts, start = [], 0
-    with jax.named_scope("coarse_otf"):
-        for count, t_max, order in _panel_overlap_orders(options, nu_x.shape[-1]):
-            stop = start + count
-            parts.append(_otf_overlap(aberrations, nu_x[..., start:stop],
-                                      nu_y[..., start:stop], field, order,
-                                      remat=options.get("_remat_otf", False) and t_max < 1))
-            start = stop
-        return jnp.concatenate(parts, axis=-1)
+    for count, t_max, order in _panel_overlap_orders(options, nu_x.shape[-1]):
+        stop = start + count
+        parts.append(_otf_overlap(aberrations, nu_x[..., start:stop], nu_y[..., start:stop],
+                                  field, order,
+                                  remat=options.get("_remat_otf", False) and t_max < 1))
+        start = stop
+    return jnp.concatenate(parts, axis=-1)
 
 
 #: Fine S_e nodes per block of angular rows (see ``_fine_blocks``).
@@ -623,6 +623,7 @@ def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror,
     return jnp.sum(w * s_e)
 
 
+@jax.named_scope("interpolation_estimate")
 def _interpolation_estimate(h, u, signal, noise, total, options, dtype, ridges):
     """Estimate of the fine S_e stage's interpolation error, relative to its ``total``: the
     largest change of the total when the OTF's interpolants from the coarse nodes ``h`` lose
@@ -630,10 +631,9 @@ def _interpolation_estimate(h, u, signal, noise, total, options, dtype, ridges):
     gradient), each with the closed-form peaks (``ridges``) if the total has them."""
     nodes, se_nodes = options["nodes"], options["se_nodes"]
     h, u, signal, noise, total = jax.lax.stop_gradient((h, u, signal, noise, total))
-    with jax.named_scope("interpolation_estimate"):
-        change = [jnp.abs(_fine_total(h, u, signal, noise, nodes, se_nodes, dtype, False,
-                                      drop, ridges) - total) for drop in _ESTIMATE_DROP]
-        return functools.reduce(jnp.maximum, change) / jnp.abs(total)
+    change = [jnp.abs(_fine_total(h, u, signal, noise, nodes, se_nodes, dtype, False, drop,
+                                  ridges) - total) for drop in _ESTIMATE_DROP]
+    return functools.reduce(jnp.maximum, change) / jnp.abs(total)
 
 
 #: The lowered interpolants of ``_interpolation_estimate``: one Legendre degree fewer in
@@ -899,6 +899,7 @@ def _in_check_dtype(operands):
     return jax.tree_util.tree_map(cast, jax.lax.stop_gradient(operands))
 
 
+@jax.named_scope("check_grid")
 def _check_value(check_grid, dtype, operands):
     """A shortcut's check value, computed in float32 and returned in ``dtype``.
 
@@ -911,8 +912,7 @@ def _check_value(check_grid, dtype, operands):
     1e38 or below 1e-45) make the check non-finite, which refuses the trial: the tier's own
     grid, in the merit's dtype, then gives the value.
     """
-    with jax.named_scope("check_grid"):
-        return _apply_merit(check_grid, _CHECK_DTYPE, _in_check_dtype(operands)).astype(dtype)
+    return _apply_merit(check_grid, _CHECK_DTYPE, _in_check_dtype(operands)).astype(dtype)
 
 
 def _eligible(operands, u_max):
