@@ -18,6 +18,14 @@ def jmse_fn(**options):
                                                                **options))
 
 
+@functools.cache
+def jmse_value_and_grad_fn(**options):
+    """``jax.jit`` of ``jax.value_and_grad`` of ``jmse`` in the aberrations (the first
+    argument), the static ``options`` closed over (cached per options)."""
+    return jax.jit(jax.value_and_grad(
+        lambda ab, field, u, signal, noise: jj.jmse(ab, field, u, signal, noise, **options)))
+
+
 
 
 _SEIDEL_KEYS = ("w020", "w040", "w131", "w222", "w220", "w311", "w111")

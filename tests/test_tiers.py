@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from compiled import assert_vmap_matches_singles, jmse_fn
+from compiled import assert_vmap_matches_singles, jmse_fn, jmse_value_and_grad_fn
 from problems import REFERENCES
 
 import jmse_jax as jj
@@ -74,7 +74,9 @@ def test_tier_index_honours_both_bounds():
 
 
 def _fixed(ab, field, u, grid):
-    return float(jax.jit(lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **grid))(ab))
+    """The fixed ``grid``'s value, from one compiled program per grid (field and ``u`` are
+    arguments, so the designs of every test share it)."""
+    return float(jmse_fn(**grid)(ab, field, u, SIGNAL, NOISE))
 
 
 def _first_estimate(ab, field, u, grid):
@@ -94,8 +96,7 @@ def _to_float32(tree):
 
 def _fixed32(ab, field, u, grid):
     """``_fixed`` with every input in float32 (the whole computation in float32)."""
-    return float(jax.jit(lambda *args: jj.jmse(*args, **grid))(
-        *_to_float32((ab, field, u, SIGNAL, NOISE))))
+    return float(jmse_fn(**grid)(*_to_float32((ab, field, u, SIGNAL, NOISE))))
 
 
 @pytest.mark.parametrize("ab, field, u, tier, path", [
@@ -131,8 +132,7 @@ def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
     # The benchmarks' report of the plan taken (``_route``) names the same tier and grid.
     route = _route(ab, field, u, SIGNAL, NOISE)
     assert (route["tier"], route["path"], route["one_ray"]) == (tier, taken, False)
-    expected, expected_grad = jax.jit(jax.value_and_grad(
-        lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **grid)))(ab)
+    expected, expected_grad = jmse_value_and_grad_fn(**grid)(ab, field, u, SIGNAL, NOISE)
     eager = jj.jmse(ab, field, u, SIGNAL, NOISE)
     jitted = jmse_fn()(ab, field, u, SIGNAL, NOISE)
     value, gradient = _default_value_and_grad(ab, field, u, SIGNAL, NOISE)
@@ -251,8 +251,8 @@ def test_shortcut_check_outside_float32_range_falls_back_to_the_tier_grid(scale)
     signal = jj.MarkovSignal(scale * SIGNAL.variance, SIGNAL.correlation_length)
     noise = jj.WhiteNoise(scale * NOISE.variance)
     value, gradient = _default_value_and_grad(ab, field, u, signal, noise)
-    expected, expected_grad = jax.jit(jax.value_and_grad(
-        lambda a: jj.jmse(a, field, u, SIGNAL, NOISE, **jj.DEFAULT_TIERS[1][2])))(ab)
+    expected, expected_grad = jmse_value_and_grad_fn(**jj.DEFAULT_TIERS[1][2])(
+        ab, field, u, SIGNAL, NOISE)
     assert float(value) == pytest.approx(scale * float(expected), rel=1e-12)
     for name in ("w020", "w040", "w131", "w222", "w220"):
         np.testing.assert_allclose(getattr(gradient, name),
