@@ -1,0 +1,102 @@
+"""Where the test suite's time goes: JAX tracing, lowering and XLA compilation per test.
+
+The suite is compile-bound. This file is both a pytest plugin that records every trace,
+lowering and backend compilation (``jax.monitoring`` duration events) with the test that
+caused it, one JSON-lines file per xdist worker, and the script that summarises them.
+
+Run the suite with it (from the repository root)::
+
+    PYTHONPATH=benchmarks .venv/bin/python -m pytest -q -n auto --dist loadfile \\
+        -p no:cacheprovider -p suite_compile_probe
+    .venv/bin/python benchmarks/suite_compile_probe.py      # summary (markdown on stdout)
+
+The events go to ``$JMSE_JAX_COMPILE_PROBE_DIR`` (default ``benchmarks/results/
+suite_compile``); each run of the plugin replaces its worker's file. A compilation served
+from the persistent compilation cache records no backend-compile event.
+"""
+
+from __future__ import annotations
+
+import collections
+import glob
+import json
+import os
+import pathlib
+
+_DIR = pathlib.Path(os.environ.get(
+    "JMSE_JAX_COMPILE_PROBE_DIR",
+    pathlib.Path(__file__).resolve().parent / "results" / "suite_compile"))
+_EVENTS = {
+    "/jax/core/compile/jaxpr_trace_duration": "trace",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
+    "/jax/core/compile/backend_compile_duration": "compile",
+}
+_state = {"test": "<collection>", "out": None}
+
+
+def _listener(event, duration, **kwargs):
+    kind = _EVENTS.get(event)
+    if kind is not None and _state["out"] is not None:
+        record = {"test": _state["test"], "kind": kind, "s": duration,
+                  "fun": str(kwargs.get("fun_name", ""))}
+        _state["out"].write(json.dumps(record) + "\n")
+        _state["out"].flush()
+
+
+def pytest_configure(config):
+    import jax.monitoring
+
+    _DIR.mkdir(parents=True, exist_ok=True)
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+    _state["out"] = open(_DIR / f"events_{worker}.jsonl", "w")  # noqa: SIM115
+    jax.monitoring.register_event_duration_secs_listener(_listener)
+
+
+def pytest_runtest_logstart(nodeid, location):
+    _state["test"] = nodeid
+
+
+def pytest_unconfigure(config):
+    if _state["out"] is not None:
+        _state["out"].close()
+        _state["out"] = None
+
+
+def summarise(directory=_DIR, top=25) -> str:
+    """Markdown summary of the recorded events: totals, the programs compiled most, the
+    tests and files that spend most on compilation."""
+    events = []
+    for path in sorted(glob.glob(str(pathlib.Path(directory) / "events_*.jsonl"))):
+        with open(path) as f:
+            events.extend(json.loads(line) for line in f if line.strip())
+    if not events:
+        raise SystemExit(f"no events in {directory}: run the suite with -p suite_compile_probe")
+    totals = collections.Counter()
+    for e in events:
+        totals[e["kind"]] += e["s"]
+    lines = ["# Test suite: trace, lowering and compilation time", "",
+             "| kind | seconds | events |", "|---|---:|---:|"]
+    for kind in ("trace", "lower", "compile"):
+        n = sum(1 for e in events if e["kind"] == kind)
+        lines.append(f"| {kind} | {totals[kind]:.0f} | {n} |")
+    by_fun = collections.defaultdict(list)
+    by_test = collections.Counter()
+    by_file = collections.Counter()
+    for e in events:
+        by_test[e["test"]] += e["s"]
+        by_file[e["test"].split("::")[0]] += e["s"]
+        if e["kind"] == "compile":
+            by_fun[e["fun"]].append(e["s"])
+    lines += ["", "## Programs by compile time", "", "| program | compiles | seconds | largest |",
+              "|---|---:|---:|---:|"]
+    for fun, times in sorted(by_fun.items(), key=lambda kv: -sum(kv[1]))[:top]:
+        lines.append(f"| `{fun}` | {len(times)} | {sum(times):.1f} | {max(times):.1f} |")
+    lines += ["", "## Files (trace + lower + compile)", "", "| file | seconds |", "|---|---:|"]
+    lines += [f"| {k} | {v:.0f} |" for k, v in by_file.most_common(top)]
+    lines += ["", "## Tests (trace + lower + compile)", "", "| test | seconds |", "|---|---:|"]
+    lines += [f"| {k} | {v:.1f} |" for k, v in by_test.most_common(top)]
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    print(summarise(), end="")
