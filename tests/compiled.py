@@ -26,8 +26,6 @@ def jmse_value_and_grad_fn(**options):
         lambda ab, field, u, signal, noise: jj.jmse(ab, field, u, signal, noise, **options)))
 
 
-
-
 _SEIDEL_KEYS = ("w020", "w040", "w131", "w222", "w220", "w311", "w111")
 
 
