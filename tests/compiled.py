@@ -13,17 +13,36 @@ import jmse_jax as jj
 
 @functools.cache
 def jmse_fn(**options):
-    """``jax.jit`` of ``jmse`` with the static ``options`` closed over (cached per options)."""
-    return jax.jit(lambda ab, field, u, signal, noise: jj.jmse(ab, field, u, signal, noise,
-                                                               **options))
+    """``jax.jit`` of ``jmse`` with the static ``options`` bound (cached per options)."""
+    return jax.jit(functools.partial(jj.jmse, **options))
 
 
 @functools.cache
 def jmse_value_and_grad_fn(**options):
     """``jax.jit`` of ``jax.value_and_grad`` of ``jmse`` in the aberrations (the first
-    argument), the static ``options`` closed over (cached per options)."""
-    return jax.jit(jax.value_and_grad(
-        lambda ab, field, u, signal, noise: jj.jmse(ab, field, u, signal, noise, **options)))
+    argument), the static ``options`` bound (cached per options).
+
+    Without options it is ``jax.jit(jax.value_and_grad(jj.jmse))``, the program of the
+    README's example: JAX's persistent compilation cache, which the test processes share
+    (``conftest.py``), keys a program by its name and operations, so every test and
+    process that calls it with inputs of the same types compiles it once between them.
+    A Python float is weakly typed and ``jnp.float64(0.95)`` is not, so the two make two
+    programs: the tests pass Python floats (in a ``Seidel``, ``MarkovSignal`` and
+    ``WhiteNoise`` too), as the README does."""
+    return jax.jit(jax.value_and_grad(functools.partial(jj.jmse, **options)))
+
+
+@jax.jit
+def fast_value_and_grad_in_everything(ab, p):
+    """The fast preset's value and its gradients in the coefficients ``ab`` and in each
+    scalar of the dict ``p``: ``field``, ``u``, ``noise`` (``WhiteNoise``), ``variance`` and
+    ``mu`` (``MarkovSignal``). The spectra are built inside the program, so out-of-range
+    parameters reach ``jmse`` traced (their constructors reject concrete ones). Shared by
+    tests/test_merit.py and tests/test_radial.py."""
+    def merit(ab, p):
+        return jj.jmse(ab, p["field"], p["u"], jj.MarkovSignal(p["variance"], p["mu"]),
+                       jj.WhiteNoise(p["noise"]), preset="fast")
+    return jax.value_and_grad(merit, argnums=(0, 1))(ab, p)
 
 
 _SEIDEL_KEYS = ("w020", "w040", "w131", "w222", "w220", "w311", "w111")

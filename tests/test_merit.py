@@ -11,7 +11,7 @@ import numpy as np
 import oracles
 import problems
 import pytest
-from compiled import jmse_fn
+from compiled import fast_value_and_grad_in_everything, jmse_fn
 from conftest import FIG1_BASELINE_B64, FIG1_COEFFICIENTS, FIG1_JMSE
 from scipy import integrate
 
@@ -246,9 +246,12 @@ def test_wide_band_kink_is_resolved(coefficients, field, u):
 
 @pytest.mark.parametrize("u", [math.sqrt(0.5), math.sqrt(0.5) + 1e-9, 1.0 - 1e-9, 1.0])
 def test_gradient_in_u_at_the_ends_of_the_split_range(u):
-    grad = jax.grad(lambda u: jj.jmse(WIDE_BAND_DESIGN, 0.8, u, jj.MarkovSignal(1.0, 5.0),
-                                      jj.WhiteNoise(1e-3), preset="fast"))
-    assert np.isfinite(float(grad(u)))
+    """Where the angular rule splits at arccos(u) (``angular_split``) and at its ends, the
+    value and every derivative are finite."""
+    value, grad = _range_value_and_grad(
+        WIDE_BAND_DESIGN, dict(field=0.8, u=u, noise=1e-3, variance=1.0, mu=5.0))
+    assert math.isfinite(float(value)) and float(grad["u"]) != 0.0
+    assert all(math.isfinite(float(g)) for g in grad.values())
 
 
 def test_other_quadratures_and_engines_agree(fig1):
@@ -417,11 +420,11 @@ def test_out_of_range_under_jit_is_inf_with_zero_gradient(fig1, changes):
     baseline alike."""
     ab, field, u, _, _ = fig1
     point = dict(field=field, u=u, noise=1e-3, variance=1.0, mu=5.0)
-    bad = {k: jnp.asarray(v, jnp.float64) for k, v in {**point, **changes}.items()}
+    bad = {k: float(v) for k, v in {**point, **changes}.items()}
     value, grad = _range_value_and_grad(ab, bad)
     assert float(value) == math.inf
     assert all(float(g) == 0.0 for g in grad.values())
-    good = {k: jnp.asarray(v, jnp.float64) for k, v in point.items()}
+    good = {k: float(v) for k, v in point.items()}
     assert math.isfinite(float(_range_value_and_grad(ab, good)[0]))
     assert float(_range_baseline(ab, bad)) == math.inf
     assert math.isfinite(float(_range_baseline(ab, good)))
@@ -431,12 +434,13 @@ def _spectra(p):
     return jj.MarkovSignal(p["variance"], p["mu"]), jj.WhiteNoise(p["noise"])
 
 
-@jax.jit
 def _range_value_and_grad(ab, p):
-    """value_and_grad of the fast preset in field, u and the spectra's parameters (one
-    compilation for every case of the test above)."""
-    return jax.value_and_grad(
-        lambda p: jj.jmse(ab, p["field"], p["u"], *_spectra(p), preset="fast"))(p)
+    """The fast preset's value and its gradient in the coefficients and in ``p``'s field, u
+    and spectral parameters, as one dict (``tests/compiled.py``: the program
+    tests/test_radial.py uses too)."""
+    value, (d_ab, d_p) = fast_value_and_grad_in_everything(ab, p)
+    return value, {**d_p, **{k: getattr(d_ab, k) for k in ("w020", "w040", "w131", "w222",
+                                                           "w220", "w311", "w111")}}
 
 
 @jax.jit
@@ -510,9 +514,6 @@ def test_traced_band_past_u_max_is_computed(fig1):
     band (S_e > 0)."""
     ab, field, _, _, _ = fig1
     point = dict(field=field, noise=1e-3, variance=1.0, mu=5.0)
-    values = [float(_range_value_and_grad(ab, {**{k: jnp.asarray(v, jnp.float64)
-                                                 for k, v in point.items()},
-                                              "u": jnp.asarray(u, jnp.float64)})[0])
-              for u in (1.4, 1.5, 1.6)]
+    values = [float(_range_value_and_grad(ab, {**point, "u": u})[0]) for u in (1.4, 1.5, 1.6)]
     assert all(math.isfinite(v) for v in values)
     assert values[0] < values[1] < values[2]

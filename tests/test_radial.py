@@ -16,7 +16,7 @@ import numpy as np
 import oracles
 import problems
 import pytest
-from compiled import jmse_fn
+from compiled import fast_value_and_grad_in_everything, jmse_fn
 
 import jmse_jax as jj
 from jmse_jax import _merit, _radial
@@ -225,16 +225,18 @@ def _coefficients(ab):
     return {k: getattr(ab, k) for k in ("w020", "w040", "w131", "w222", "w220", "w311", "w111")}
 
 
-@jax.jit
 def _value_and_grad(ab, field, u, variance, mu):
-    # The fast preset: its one-ray plan takes the same derivative rules as the default's two
-    # (whose dispatch on the axis is checked by test_vmap_mixes_symmetric_and_other_designs
-    # and by the second-derivative tests) and compiles in 15 s instead of 80 s with every
-    # operand differentiated (d/du alone doubles the default's compile).
-    def merit(ab, field, u, variance, mu):
-        return jj.jmse(ab, field, u, jj.MarkovSignal(1.0, mu), jj.WhiteNoise(variance),
-                       preset="fast")
-    return jax.value_and_grad(merit, argnums=(0, 1, 2, 3, 4))(ab, field, u, variance, mu)
+    """Value and gradient ``(d_ab, d_field, d_u, d_noise, d_mu)`` of the fast preset with
+    ``MarkovSignal(1, mu)`` and ``WhiteNoise(variance)``, from the program of every
+    operand's gradient that tests/test_merit.py uses too (``tests/compiled.py``).
+
+    The fast preset: its one-ray plan takes the same derivative rules as the default's two
+    (whose dispatch on the axis is checked by test_vmap_mixes_symmetric_and_other_designs
+    and by the second-derivative tests) and compiles in 15 s instead of 80 s with every
+    operand differentiated (d/du alone doubles the default's compile)."""
+    value, (d_ab, d_p) = fast_value_and_grad_in_everything(
+        ab, dict(field=field, u=u, noise=variance, variance=1.0, mu=mu))
+    return value, (d_ab, d_p["field"], d_p["u"], d_p["noise"], d_p["mu"])
 
 
 _AXIS_DESIGN = dict(w020=-1.5, w040=0.8, w131=0.6, w222=-0.4)

@@ -271,11 +271,9 @@ def test_shortcut_keeps_the_middle_tier_accurate(ab, field, u, name):
     assert abs(value - reference) <= 1e-5 * reference
 
 
-@jax.jit
-def _default_value_and_grad(ab, field, u, signal, noise):
-    """The default's value and gradient in the coefficients, every input traced (one
-    compilation serves every test here that passes these input types)."""
-    return jax.value_and_grad(lambda a: jj.jmse(a, field, u, signal, noise))(ab)
+#: The default's value and gradient in the coefficients, every input traced: the program
+#: the README's example and other test modules compile (``tests/compiled.py``).
+_default_value_and_grad = jmse_value_and_grad_fn()
 
 
 @jax.jit

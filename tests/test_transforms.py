@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from compiled import jmse_fn
+from compiled import fast_value_and_grad_in_everything, jmse_fn
 from conftest import FIG1_COEFFICIENTS
 from scipy import optimize
 
@@ -21,20 +21,27 @@ PARAM_NAMES = [*KEYS, "field", "u", "signal variance", "correlation length", "no
 OTHER_PARAMS = np.array([4.509, 2.635, -4.158, 4.824, 2.024, 0.48, 0.24, 2.0, 3.0, 3.26e-4])
 
 
-def _unpack(theta):
-    ab = jj.Seidel(**{k: theta[i] for i, k in enumerate(KEYS)})
-    return ab, theta[5], theta[6], jj.MarkovSignal(theta[7], theta[8]), jj.WhiteNoise(theta[9])
-
-
 _FAST = jmse_fn(preset="fast")
 
 
-@jax.jit
+def _point(theta):
+    """``(ab, p)`` of ``fast_value_and_grad_in_everything`` at the parameter vector
+    ``theta``, as Python floats (the types tests/test_merit.py and tests/test_radial.py
+    pass: one compiled program serves the three modules)."""
+    t = [float(x) for x in theta]
+    return (jj.Seidel(**dict(zip(KEYS, t[:5], strict=True))),
+            dict(field=t[5], u=t[6], variance=t[7], mu=t[8], noise=t[9]))
+
+
 def _jmse_theta(theta):
-    return _FAST(*_unpack(theta))
+    return fast_value_and_grad_in_everything(*_point(theta))[0]
 
 
-_jmse_grad = jax.jit(jax.grad(_jmse_theta))
+def _jmse_grad(theta):
+    """The gradient in ``theta``'s order (``PARAM_NAMES``)."""
+    _, (d_ab, d_p) = fast_value_and_grad_in_everything(*_point(theta))
+    return np.array([*(float(getattr(d_ab, k)) for k in KEYS),
+                     *(float(d_p[k]) for k in ("field", "u", "variance", "mu", "noise"))])
 
 
 def _central_difference(fn, theta, steps):
@@ -52,7 +59,7 @@ def _central_difference(fn, theta, steps):
 
 @pytest.mark.parametrize("theta", [FIG1_PARAMS, OTHER_PARAMS], ids=["fig1", "other"])
 def test_jmse_gradient_matches_finite_differences(theta):
-    grad = np.asarray(_jmse_grad(jnp.asarray(theta)))
+    grad = _jmse_grad(theta)
     assert np.all(np.isfinite(grad))
     steps = 1e-5 * np.maximum(np.abs(theta), 1e-2)  # relative steps; |theta| floor for zeros
     fd = _central_difference(_jmse_theta, theta, steps)
