@@ -38,7 +38,8 @@ def fast_value_and_grad_in_everything(ab, p):
     scalar of the dict ``p``: ``field``, ``u``, ``noise`` (``WhiteNoise``), ``variance`` and
     ``mu`` (``MarkovSignal``). The spectra are built inside the program, so out-of-range
     parameters reach ``jmse`` traced (their constructors reject concrete ones). Shared by
-    tests/test_merit.py and tests/test_radial.py."""
+    tests/test_merit.py, tests/test_radial.py and tests/test_transforms.py, which pass
+    Python floats."""
     def merit(ab, p):
         return jj.jmse(ab, p["field"], p["u"], jj.MarkovSignal(p["variance"], p["mu"]),
                        jj.WhiteNoise(p["noise"]), preset="fast")

@@ -124,9 +124,9 @@ def test_default_preset_merit_is_the_field_mean_of_jmse():
     value, grad = jax.jit(jax.value_and_grad(
         lambda s: lens_merit(lens_at(s), fields=fields)))(shift)
 
-    # The oracle, by the chain rule: the default's value and gradient in the coefficients
-    # (the compiled program the other test modules share), dotted with d(waves)/d(shift).
-    # The coefficients as Python floats, as the other modules pass them (one program).
+    # The oracle, by the chain rule: the default's value and gradient in the coefficients,
+    # dotted with d(waves)/d(shift). The program is the one the other test modules and the
+    # README compile (tests/compiled.py), so the coefficients go in as Python floats.
     waves, d_waves = jax.jvp(lambda s: jl.seidel_waves(lens_at(s)), (shift,), (1.0,))
     waves = jax.tree_util.tree_map(float, waves)
     per_field = []
