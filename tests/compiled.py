@@ -7,6 +7,7 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+from oracles import SEIDEL_KEYS
 
 import jmse_jax as jj
 
@@ -41,12 +42,13 @@ def fast_value_and_grad_in_everything(ab, p):
     tests/test_merit.py, tests/test_radial.py and tests/test_transforms.py, which pass
     Python floats."""
     def merit(ab, p):
-        return jj.jmse(ab, p["field"], p["u"], jj.MarkovSignal(p["variance"], p["mu"]),
-                       jj.WhiteNoise(p["noise"]), preset="fast")
+        return jj.jmse(ab, p["field"], p["u"], *spectra_of(p), preset="fast")
     return jax.value_and_grad(merit, argnums=(0, 1))(ab, p)
 
 
-_SEIDEL_KEYS = ("w020", "w040", "w131", "w222", "w220", "w311", "w111")
+def spectra_of(p):
+    """``MarkovSignal(p["variance"], p["mu"])`` and ``WhiteNoise(p["noise"])``."""
+    return jj.MarkovSignal(p["variance"], p["mu"]), jj.WhiteNoise(p["noise"])
 
 
 def assert_vmap_matches_singles(merit, designs):
@@ -54,7 +56,7 @@ def assert_vmap_matches_singles(merit, designs):
     ``(aberrations, field)``) equals the unbatched evaluation of each design: value to
     1e-13, gradients in the coefficients and the field to 1e-10."""
     def plain(ab):
-        return jj.Seidel(**{k: getattr(ab, k) for k in _SEIDEL_KEYS})
+        return jj.Seidel(**{k: getattr(ab, k) for k in SEIDEL_KEYS})
 
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack([jnp.asarray(v, jnp.float64) for v in x]),
                                    *[plain(ab) for ab, _ in designs])

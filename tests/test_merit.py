@@ -11,7 +11,7 @@ import numpy as np
 import oracles
 import problems
 import pytest
-from compiled import fast_value_and_grad_in_everything, jmse_fn
+from compiled import fast_value_and_grad_in_everything, jmse_fn, spectra_of
 from conftest import FIG1_BASELINE_B64, FIG1_COEFFICIENTS, FIG1_JMSE
 from scipy import integrate
 
@@ -430,22 +430,17 @@ def test_out_of_range_under_jit_is_inf_with_zero_gradient(fig1, changes):
     assert math.isfinite(float(_range_baseline(ab, good)))
 
 
-def _spectra(p):
-    return jj.MarkovSignal(p["variance"], p["mu"]), jj.WhiteNoise(p["noise"])
-
-
 def _range_value_and_grad(ab, p):
     """The fast preset's value and its gradient in the coefficients and in ``p``'s field, u
     and spectral parameters, as one dict (``tests/compiled.py``: the program
     tests/test_radial.py uses too)."""
     value, (d_ab, d_p) = fast_value_and_grad_in_everything(ab, p)
-    return value, {**d_p, **{k: getattr(d_ab, k) for k in ("w020", "w040", "w131", "w222",
-                                                           "w220", "w311", "w111")}}
+    return value, {**d_p, **{k: getattr(d_ab, k) for k in oracles.SEIDEL_KEYS}}
 
 
 @jax.jit
 def _range_baseline(ab, p):
-    return jj.baseline_jmse(ab, p["field"], p["u"], *_spectra(p), B=16)
+    return jj.baseline_jmse(ab, p["field"], p["u"], *spectra_of(p), B=16)
 
 
 @pytest.mark.parametrize("bad", [float("nan"), float("inf")])
