@@ -43,6 +43,9 @@ import numpy as np
 
 from jmse_jax import _numerics, _otf
 
+#: The first grid's shape: nodes, chords per node (2 halves x 18), Gauss nodes per chord,
+#: collocation points per chord (the C kernel is written for Q = 4, as the engine's Seidel
+#: phases use).
 NODES, CHORDS, J, Q = 384, 36, 14, 4
 
 _C_SOURCE = r"""
@@ -104,16 +107,14 @@ def _build(directory: pathlib.Path) -> ctypes.CDLL:
 
 
 def _problem():
-    """Random phases, the chord weights, the Lagrange interpolation from Q Chebyshev points
-    to J Gauss nodes, its moments and the sine polynomial's coefficients."""
+    """Random phases and chord weights, the engine's own rule along the chords (the
+    Lagrange matrix from its Q Chebyshev points to its J Gauss nodes, the moments and the
+    Gauss weights they sum to) and the sine polynomial's coefficients."""
     rng = np.random.default_rng(0)
     phase = rng.uniform(-4.0, 4.0, (NODES, CHORDS, Q))
     chord_w = rng.uniform(0.0, 0.1, (NODES, CHORDS))
-    x, w = np.polynomial.legendre.leggauss(J)
-    colloc = np.cos(np.pi * (np.arange(Q) + 0.5) / Q)
-    interp = np.array([[np.prod([(xj - colloc[m]) / (colloc[q] - colloc[m])
-                                 for m in range(Q) if m != q]) for q in range(Q)] for xj in x])
-    moment = w[:, None] * interp  # sums over q to the Gauss weights, as the engine's do
+    *_, interp, moment = _otf._overlap_rule(CHORDS // 2, J, Q)
+    w = moment.sum(axis=1)
     coefficients = np.asarray(_numerics._SIN_PI_R, np.float64)
     return phase, chord_w, interp, moment, w, coefficients
 

@@ -222,7 +222,7 @@ def test_anisotropic_spectra_or_a_grid_override_keep_the_polar_grid(monkeypatch)
 
 
 def _coefficients(ab):
-    return {k: getattr(ab, k) for k in ("w020", "w040", "w131", "w222", "w220", "w311", "w111")}
+    return {k: getattr(ab, k) for k in oracles.SEIDEL_KEYS}
 
 
 def _value_and_grad(ab, field, u, variance, mu):
