@@ -1,12 +1,13 @@
 # Two entry points for a fresh machine with Python 3.11:
 #   make run   - install into .venv and run the main job (jmse-jax reproduce, built-in defaults)
 #   make test  - install into .venv (with test extras) and run the test suite
+# (make test-slow runs the heavier checks that make test leaves out)
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 OUT ?= jmse_output
 
-.PHONY: run test install lint bench clean
+.PHONY: run test test-slow install lint bench clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +24,11 @@ run: $(BIN)/.installed
 # dominates the suite, is single-threaded in XLA, so the workers overlap it.
 test: $(BIN)/.installed
 	$(BIN)/python -m pytest -q -n auto --dist loadfile
+
+# The heavier checks the default run leaves out (second derivatives, the GPU's vectorised
+# batching, float32 twins of float64 checks, the CLI's compile cache): tests marked slow.
+test-slow: $(BIN)/.installed
+	$(BIN)/python -m pytest -q -n auto --dist loadfile -m slow
 
 lint: $(BIN)/.installed
 	$(BIN)/ruff check jmse_jax tests benchmarks notebooks

@@ -249,6 +249,7 @@ def _eval_in_subprocess(tmp_path, *extra):
     return json.loads(out_json.read_text())
 
 
+@pytest.mark.slow
 def test_compile_cache_is_kept_between_runs_and_can_be_turned_off(tmp_path):
     off = _eval_in_subprocess(tmp_path, "--no-compile-cache")
     assert not (tmp_path / "cache").exists()

@@ -306,10 +306,11 @@ def test_derivatives_break_the_symmetry_correctly(field):
     vanish (on it) takes the one-ray plan for its value. Off the axis the one ray cannot see
     the first-order effect of astigmatism (its rho^2/2 part acts like defocus), so the value
     and derivatives under differentiation are the polar grid's; on the axis every change is
-    harmless at first order, so the one ray's own first derivatives stand. Second
-    derivatives (not zero in coma and astigmatism, nor in the field on the axis, where the
-    one ray got the sign wrong) are always the polar grid's. Against central differences of
-    the polar grid's value off the axis and of the merit itself on it."""
+    harmless at first order, so the one ray's own first derivatives stand. Against central
+    differences of the polar grid's value off the axis and of the merit itself on it.
+    (Second derivatives, not zero in coma and astigmatism, nor in the field on the axis,
+    where the one ray got the sign wrong, are always the polar grid's: the next two tests,
+    run with ``make test-slow``.)"""
     theta = np.array([1.0, 0.5, 0.0, 0.0, 0.3])
     x = jnp.asarray(theta)
     grad = np.asarray(jax.jit(jax.grad(_fast_theta))(x, field))
@@ -331,8 +332,15 @@ def test_derivatives_break_the_symmetry_correctly(field):
     else:
         assert float(value) == float(_fast_theta(x, field))
         assert grad[2] == 0.0 and grad[3] == 0.0
-    if not off_axis:  # (second derivatives on the axis: the next test)
-        return
+
+
+@pytest.mark.slow
+def test_second_derivatives_break_the_symmetry_correctly():
+    """The test above's design off the axis (field 0.7): second derivatives in coma and
+    astigmatism, and across, are the polar grid's, not zero."""
+    theta = np.array([1.0, 0.5, 0.0, 0.0, 0.3])
+    x = jnp.asarray(theta)
+    field = 0.7
     # Second derivatives in coma and astigmatism, and across, from the polar grid's
     # gradient's differences (exact to ~1e-12, so a plain central step suffices).
     hess = np.asarray(jax.jit(jax.hessian(_fast_theta))(x, field))
@@ -346,6 +354,7 @@ def test_derivatives_break_the_symmetry_correctly(field):
     assert abs(hess[2, 2]) > 1e-5 and abs(hess[3, 3]) > 1e-6
 
 
+@pytest.mark.slow
 def test_second_derivative_in_the_field_on_the_axis():
     """On the axis the field moves coma and astigmatism in at second order: d^2 J / dh^2
     there is the polar grid's (the one ray gave +7.6e-3 against -4.9e-2 on the Fig. 1

@@ -183,6 +183,7 @@ def test_peaks_option_reaches_the_grid_the_default_routes_to():
         jj.jmse(ab, field, u, signal, noise, peaks="yes")
 
 
+@pytest.mark.slow
 def test_peaks_under_vmap_match_each_design_alone(vectorised_vmap):
     """A batch (``vmap``, vectorised as on a GPU) gives each design what it gets alone, with
     the peaks' closed forms run where one of its designs needs them
@@ -210,6 +211,7 @@ def test_peaks_under_vmap_match_each_design_alone(vectorised_vmap):
     assert abs(float(plain[0]) / float(without) - 1.0) > 1e-8
 
 
+@pytest.mark.slow
 def test_second_derivatives_with_the_peaks():
     """The Hessian (forward over reverse) against central differences of the gradient: the
     Newton minimum's last two steps are differentiated, whose second derivatives are the

@@ -376,6 +376,7 @@ def test_float32_design_with_float64_spectra_differentiates(monkeypatch):
                                    rtol=1e-4, atol=1e-5 * float(expected))
 
 
+@pytest.mark.slow
 def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch, vectorised_vmap):
     """Under vmap (value_and_grad, vectorised as on a GPU: the dispatch's batching rule)
     every design gets its own tier's grid, in a batch
@@ -422,8 +423,8 @@ def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
     """On CPU ``vmap`` of ``jmse`` and of its derivatives runs the designs one at a time
     (``SEQUENTIAL_VMAP_BACKENDS``): the tiers' vectorised dispatch is never reached (it
     raises here), and every design gets bit for bit what it gets alone, for the value,
-    ``value_and_grad``, a batch over ``u`` only, ``jacfwd`` and the Hessian (against
-    central differences of the gradient)."""
+    ``value_and_grad`` and a batch over ``u`` only (forward mode and the Hessian: the next
+    test)."""
     from jmse_jax import _merit
 
     assert jax.default_backend() in _merit.SEQUENTIAL_VMAP_BACKENDS
@@ -459,6 +460,28 @@ def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
     over_u = jax.jit(jax.vmap(lambda u: merit(ab, f, u)))(us)
     for i, u in enumerate(us):
         assert float(over_u[i]) == float(jax.jit(merit)(ab, f, u))
+
+
+@pytest.mark.slow
+def test_forward_mode_and_hessian_under_vmap_on_cpu(monkeypatch):
+    """The rest of the test above, for forward mode and second derivatives (their programs
+    take about a minute to compile, so they run with ``make test-slow``): on CPU ``jacfwd``
+    equals the gradient, the Hessian equals central differences of the gradient, and a
+    ``vmap`` of the Hessian gives each design what it gets alone, without reaching the
+    vectorised dispatch."""
+    from jmse_jax import _merit
+
+    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
+
+    def vectorised(*args):
+        raise AssertionError("the vectorised tier dispatch ran")
+
+    monkeypatch.setattr(_merit, "_batched_tier", vectorised)
+
+    def merit(a, f, u=0.2):
+        return jj.jmse(a, f, u, SIGNAL, NOISE)
+
+    ab, f = jj.Seidel(**_coefficients(DESIGNS[1][0])), jnp.float64(DESIGNS[1][1])
     # Forward mode and second derivatives, in the coefficient vector.
     c0 = jnp.asarray([getattr(ab, k) for k in ("w020", "w040", "w131", "w222", "w220")])
 
@@ -480,8 +503,11 @@ def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
                                atol=1e-14 * float(jnp.max(jnp.abs(hessian))))
 
 
-@pytest.mark.parametrize("first_tol, kept", [(None, "trial"), (math.inf, "first"),
-                                             (-1.0, "trial")])
+@pytest.mark.parametrize("first_tol, kept", [
+    (None, "trial"),
+    pytest.param(math.inf, "first", marks=pytest.mark.slow),
+    pytest.param(-1.0, "trial", marks=pytest.mark.slow),
+])
 def test_shortcut_is_tried_only_up_to_u_max(monkeypatch, first_tol, kept):
     """Above ``u_max`` a tier skips its shortcut and runs its own grid, in every path (eager,
     jit, value_and_grad, vmap over u mixing both sides). With ``rtol = 1`` an eligible
@@ -520,6 +546,7 @@ def test_shortcut_is_tried_only_up_to_u_max(monkeypatch, first_tol, kept):
                                        getattr(oracle[1], name), rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_second_derivatives_of_the_default(monkeypatch):
     """The Hessian of the default (forward over reverse through the tier switch and its
     batching rule) equals central differences of its gradient, in a tier with a shortcut
@@ -575,6 +602,7 @@ def test_calls_outside_jit_compile_once(monkeypatch):
                                        atol=1e-16)
 
 
+@pytest.mark.slow
 def test_derivative_rule_differentiates_only_the_operands_with_tangents(monkeypatch):
     """The tier switch's derivative rule takes the gradient only in the operands that carry
     a tangent: forward mode in one coefficient did form the gradient in ``u``, the field and
