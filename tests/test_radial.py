@@ -300,6 +300,11 @@ def _richardson(fn, x, i, h):
     return (4 * plain(h / 2) - plain(h)) / 3
 
 
+# Defocus, spherical and field curvature only: no coma or astigmatism, so rotationally
+# symmetric at any field (the one-ray plan).
+SYMMETRIC_THETA = np.array([1.0, 0.5, 0.0, 0.0, 0.3])
+
+
 @pytest.mark.parametrize("field", [0.7, 0.0])
 def test_derivatives_break_the_symmetry_correctly(field):
     """A design symmetric only because coma and astigmatism are zero (off the axis) or
@@ -311,7 +316,7 @@ def test_derivatives_break_the_symmetry_correctly(field):
     (Second derivatives, not zero in coma and astigmatism, nor in the field on the axis,
     where the one ray got the sign wrong, are always the polar grid's: the next two tests,
     run with ``make test-slow``.)"""
-    theta = np.array([1.0, 0.5, 0.0, 0.0, 0.3])
+    theta = SYMMETRIC_THETA
     x = jnp.asarray(theta)
     grad = np.asarray(jax.jit(jax.grad(_fast_theta))(x, field))
     off_axis = field > 0
@@ -338,11 +343,9 @@ def test_derivatives_break_the_symmetry_correctly(field):
 def test_second_derivatives_break_the_symmetry_correctly():
     """The test above's design off the axis (field 0.7): second derivatives in coma and
     astigmatism, and across, are the polar grid's, not zero."""
-    theta = np.array([1.0, 0.5, 0.0, 0.0, 0.3])
-    x = jnp.asarray(theta)
-    field = 0.7
-    # Second derivatives in coma and astigmatism, and across, from the polar grid's
-    # gradient's differences (exact to ~1e-12, so a plain central step suffices).
+    x, field = jnp.asarray(SYMMETRIC_THETA), 0.7
+    # From the polar grid's gradient's differences (exact to ~1e-12, so a plain central
+    # step suffices).
     hess = np.asarray(jax.jit(jax.hessian(_fast_theta))(x, field))
     plane_grad = jax.jit(jax.grad(functools.partial(_fast_theta, plane=True)))
     for i in (2, 3):

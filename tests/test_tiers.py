@@ -347,6 +347,19 @@ def _tiers_without_one_ray(monkeypatch, tiers):
     monkeypatch.setitem(jj.PRESETS["default"], "radial", False)
 
 
+
+def _small_tiers_design_by_design(monkeypatch):
+    """``SMALL_TIERS`` without the one-ray plans, and the tiers' vectorised dispatch made to
+    raise: for the tests that CPU's ``vmap`` runs the designs one at a time."""
+    from jmse_jax import _merit
+
+    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
+
+    def vectorised(*args):
+        raise AssertionError("the vectorised tier dispatch ran")
+
+    monkeypatch.setattr(_merit, "_batched_tier", vectorised)
+
 def test_float32_design_with_float64_spectra_differentiates(monkeypatch):
     """A float32 design with the signal and noise given as Python floats (float64 with x64
     on): the tier switch's derivative rule returns a float32 tangent (it raised a dtype
@@ -428,12 +441,7 @@ def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
     from jmse_jax import _merit
 
     assert jax.default_backend() in _merit.SEQUENTIAL_VMAP_BACKENDS
-    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
-
-    def vectorised(*args):
-        raise AssertionError("the vectorised tier dispatch ran")
-
-    monkeypatch.setattr(_merit, "_batched_tier", vectorised)
+    _small_tiers_design_by_design(monkeypatch)
     designs = [DESIGNS[0], DESIGNS[1], DEFOCUS_M6]
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack([jnp.asarray(v, jnp.float64) for v in x]),
                                    *[jj.Seidel(**_coefficients(d[0])) for d in designs])
@@ -469,14 +477,7 @@ def test_forward_mode_and_hessian_under_vmap_on_cpu(monkeypatch):
     equals the gradient, the Hessian equals central differences of the gradient, and a
     ``vmap`` of the Hessian gives each design what it gets alone, without reaching the
     vectorised dispatch."""
-    from jmse_jax import _merit
-
-    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
-
-    def vectorised(*args):
-        raise AssertionError("the vectorised tier dispatch ran")
-
-    monkeypatch.setattr(_merit, "_batched_tier", vectorised)
+    _small_tiers_design_by_design(monkeypatch)
 
     def merit(a, f, u=0.2):
         return jj.jmse(a, f, u, SIGNAL, NOISE)
