@@ -12,6 +12,7 @@ import dataclasses
 import math
 import re
 import time
+import warnings
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -405,7 +406,12 @@ def _solve_optimistix(problem, lens, solver, max_steps):
 
 @eqx.filter_jit
 def _solve_lbfgsb(problem, lens, lower, upper, max_steps, tol):
-    import jaxopt
+    with warnings.catch_warnings():
+        # jaxopt warns at import that it is no longer maintained; its L-BFGS-B is the box-
+        # bounded solver this package depends on (pyproject), so the user cannot act on it.
+        warnings.filterwarnings("ignore", message="JAXopt is no longer maintained",
+                                category=DeprecationWarning)
+        import jaxopt
 
     solver = jaxopt.LBFGSB(fun=problem, maxiter=max_steps, tol=tol)
     y0 = jnp.clip(jnp.zeros_like(lower), lower, upper)
