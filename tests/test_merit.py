@@ -48,6 +48,18 @@ def test_baseline_equals_numpy_oracle(case, B):
     assert got == pytest.approx(expected, rel=1e-12)
 
 
+def test_baseline_warns_when_the_band_spans_few_lags(fig1):
+    """u * B < 5 lags per half-band: the rectangle rule is far off, and the caller is told."""
+    reference = problems.REFERENCES["fig1"]
+    reference = reference[0] if isinstance(reference, tuple) else reference
+    with pytest.warns(UserWarning, match=r"u \* B = 1 lags.*B = 5.*Use B >= 25"):
+        coarse = float(jj.baseline_jmse(*fig1, B=5))
+    assert abs(coarse / reference - 1) > 0.3  # what the warning is for
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jj.baseline_jmse(*fig1, B=25)
+
+
 def _diffraction_limited_oracle(u, variance=1.0, mu=5.0, noise=1e-3):
     """JMSE of the aberration-free lens by SciPy: (1/2 pi) ∫∫_band S_e(H0(|nu|))."""
     def s_e(r):
