@@ -1616,7 +1616,8 @@ def baseline_jmse(aberrations, field, u, signal, noise, B: int = 64):
 
     Parameters are as in ``jmse``; ``B`` is the pupil grid size (``>= 1``). Bad concrete
     input raises ``ValueError``; under ``jit`` non-finite or out-of-range values give
-    ``+inf``, as in ``jmse``.
+    ``+inf``, as in ``jmse``. A concrete ``u`` with ``u * B < BASELINE_MIN_LAGS`` (5) warns:
+    the band then holds too few lags for the rectangle rule.
     """
     check_count("B", B)
     _validate(aberrations, field, u, signal, noise)
