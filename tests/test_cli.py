@@ -175,6 +175,8 @@ def test_sweep_writes_npz_and_json(capsys, tmp_path):
     assert np.asarray(result.value)[1] == pytest.approx(expected, rel=1e-10)
 
 
+# Slow: the float32 twin of test_sweep_writes_npz_and_json (about 50 s of compilation).
+@pytest.mark.slow
 def test_sweep_in_float32(capsys, tmp_path):
     """``--dtype float32`` runs the whole sweep in float32: values (and the stored inputs)
     are float32 and within 2e-6 of the float64 ones (the oracle: ``jmse`` in float64)."""

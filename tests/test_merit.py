@@ -292,7 +292,10 @@ def test_float32_inputs_give_float32_result():
     assert float(value) == pytest.approx(FIG1_JMSE, rel=1e-3)
 
 
-@pytest.mark.parametrize("preset", ["fast", pytest.param("default", marks=pytest.mark.slow)])
+# Slow (both presets): a float32 twin of the float64 checks; float32 keeps its default-run
+# checks in test_float32_inputs_give_float32_result and tests/test_radial.py.
+@pytest.mark.slow
+@pytest.mark.parametrize("preset", ["fast", "default"])
 def test_float32_value_and_gradient_follow_float64(preset):
     """float32 takes its own cosine polynomial (degree 4 in r^2) and rounds the overlap
     engine's order along the chords up to a multiple of 8; at the Fig. 1 point and at a
