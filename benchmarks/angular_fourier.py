@@ -171,6 +171,10 @@ def main():
                                 if x["case"] == name and x["radial"] == n_r
                                 and x["layout"] == layout)
                 print(f"  R={n_r} {layout:9s} (angles per quadrant:error) {line}", flush=True)
+        # Each grid is its own program: without this the compiled programs of a whole run
+        # outgrow 24 GB ("LLVM compilation error: Cannot allocate memory").
+        jax.clear_caches()
+        write_results(args.name, rows, time.perf_counter() - start)
     seconds = time.perf_counter() - start
     print(f"{seconds:.0f} s")
     write_results(args.name, rows, seconds)
