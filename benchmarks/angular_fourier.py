@@ -21,7 +21,9 @@ grid equal (overlap order (64, 64), the library's fine rule and spectra):
 * ``circles``: ``R`` radial nodes on the library's composite radial panels over
   ``[0, min(u sqrt(2), 1)]`` times ``N`` equally spaced angles over the quadrant (``R N``
   OTF nodes); interpolated to the fine nodes by the two series in the angle, then by the
-  panels' polynomials along each fine ray.
+  panels' polynomials along each fine ray;
+* ``envelope``: the same with rows on ``r = t R(theta)``, ``R`` a smooth envelope of the
+  square's edge (``ENVELOPE``) instead of a circle.
 
 and prints the relative error of each against the bank case's converged reference. Run:
 
@@ -160,7 +162,7 @@ def main():
         if problem.u > 1 / math.sqrt(2):
             continue
         ref = problem.reference
-        floor = triangles_value(problem, 80, 40)  # the fine rule's own error, about
+        floor = triangles_value(problem, 80, 40)  # about the fine rule's own error
         print(f"{name}: triangles at (80, 40) {abs(floor - ref) / ref:.1e} off", flush=True)
         for n_r in args.radial:
             for a in (4, 5, 6, 8, 10, 12, 16, 20):
@@ -207,14 +209,13 @@ def strength(case):
 def fixed_grid_table(rows, cases):
     """Per layout and level: the cheapest one grid whose worst error over ``cases`` is
     within the level (a fixed grid must hold for every design it serves)."""
-    worst = {}
+    worst, count = {}, {}
     for x in rows:
         if x["case"] in cases:
             key = (x["layout"], x["radial"], x["angular"], x["nodes"])
             worst[key] = max(worst.get(key, 0.0), x["error"])
-    seen = {k for k in worst if all(
-        any(x["case"] == c and (x["layout"], x["radial"], x["angular"]) == k[:3]
-            for x in rows) for c in cases)}
+            count[key] = count.get(key, 0) + 1
+    seen = [k for k in worst if count[k] == len(cases)]  # grids tried on every case
     lines = []
     for level in LEVELS:
         cells = []
@@ -268,5 +269,4 @@ def write_results(name, rows, seconds, meta=None):
 
 
 if __name__ == "__main__":
-    jax.config.update("jax_enable_x64", True)
     main()
