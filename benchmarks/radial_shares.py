@@ -27,7 +27,6 @@ Writes ``results/radial_shares.json`` and ``.md``.
 from __future__ import annotations
 
 import contextlib
-import functools
 import statistics
 import sys
 import time
@@ -63,7 +62,7 @@ ROUNDS, CALLS = 30, 5
 def _clear_host_caches():
     for module in (_quadrature, _otf, _merit):
         for value in vars(module).values():
-            if isinstance(value, functools._lru_cache_wrapper):
+            if hasattr(value, "cache_clear"):  # functools.cache
                 value.cache_clear()
     jax.clear_caches()
 
@@ -79,7 +78,7 @@ def _radial_counts(counts):
     def patched(total):
         return tuple(counts) if total == n else present(total)
 
-    if n == sum(present(n)) and tuple(counts) == present(n):
+    if tuple(counts) == present(n):
         yield
         return
     _clear_host_caches()
@@ -89,17 +88,6 @@ def _radial_counts(counts):
     finally:
         _quadrature._radial_counts = present
         _clear_host_caches()
-
-
-def _first_values(grid, args):
-    """``(values, estimates)`` of the first grid ``grid`` on ``args`` (float64)."""
-    options = _Static({**jj.jmse_options(), **grid})
-    out = []
-    for ab, field, u, signal, noise in args:
-        operands = (ab, jnp.float64(field), jnp.float64(u), signal, noise)
-        value, estimate = _compiled_estimated(options, jnp.dtype(jnp.float64), operands)
-        out.append((float(value), float(estimate)))
-    return np.asarray(out).T
 
 
 def _fig1_programs(grid):
@@ -134,8 +122,8 @@ def _alternated(programs):
 
 def main():
     machine = common.machine_info()
-    first = jj.DEFAULT_TIERS[1][3].first
     shortcut = jj.DEFAULT_TIERS[1][3]
+    first = shortcut.first
     assert jj.DEFAULT_TIERS[0][3].first == first and jj.DEFAULT_TIERS[0][3].check == \
         shortcut.check, "the two shortcuts no longer share their first and check grids"
     n_angular = first["nodes"][1]
@@ -156,7 +144,7 @@ def main():
         grid = {**first, "nodes": (sum(counts), n_angular)}
         t0 = time.perf_counter()
         with _radial_counts(counts):
-            values, estimates = _first_values(grid, args)
+            values, estimates = recheck_shortcut._values_and_estimates(grid, args)
             programs.append(_fig1_programs(grid))
         error = np.abs(values / refs - 1.0)
         kept = np.asarray(_first_kept(values, estimates, check32, shortcut.rtol,

@@ -108,15 +108,22 @@ def _values(grid, args, float32=False):
     return np.asarray([float(fn(*a)) for a in args])
 
 
-def _estimates(grid, args):
-    """The first grid's error estimates (``_estimated_merit_value``), float64."""
+def _values_and_estimates(grid, args):
+    """``(values, error estimates)`` of the grid ``grid`` on ``args`` in one pass
+    (``_estimated_merit_value``), float64."""
     options = _Static({**jj.jmse_options(), **grid})
     out = []
     for a in args:
         ab, field, u, signal, noise = a
         operands = (ab, jnp.float64(field), jnp.float64(u), signal, noise)
-        out.append(float(_compiled_estimated(options, jnp.dtype(jnp.float64), operands)[1]))
-    return np.asarray(out)
+        value, estimate = _compiled_estimated(options, jnp.dtype(jnp.float64), operands)
+        out.append((float(value), float(estimate)))
+    return np.asarray(out).reshape(-1, 2).T
+
+
+def _estimates(grid, args):
+    """The first grid's error estimates (``_estimated_merit_value``), float64."""
+    return _values_and_estimates(grid, args)[1]
 
 
 def _worst(errors, mask):
