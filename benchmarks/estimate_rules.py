@@ -105,8 +105,7 @@ def _estimate_form(form, rule):
 def _fig1_program(grid, estimated):
     """AOT-compiled first grid at the Fig. 1 point: with its estimate, as the shortcut runs
     it, or (``estimated`` false) its value alone."""
-    operands = (jj.Seidel(**common.FIG1).without_tilt(), jnp.float64(common.FIG1_FIELD),
-                jnp.float64(common.FIG1_U), common.fig1_signal(), common.fig1_noise())
+    operands = radial_shares._fig1_operands()
     static, f64 = _Static({**jj.jmse_options(), **grid}), jnp.dtype(jnp.float64)
     if estimated:
         fn = jax.jit(lambda ops: _compiled_estimated(static, f64, ops))
@@ -117,17 +116,8 @@ def _fig1_program(grid, estimated):
 
 def main():
     machine = common.machine_info()
-    shortcut = jj.DEFAULT_TIERS[1][3]
+    shortcut, _, args, refs, _ = recheck_shortcut._shortcut_designs()
     first = shortcut.first
-    assert jj.DEFAULT_TIERS[0][3].first == first and jj.DEFAULT_TIERS[0][3].check == \
-        shortcut.check, "the two shortcuts no longer share their first and check grids"
-    names, args, refs = [], [], []
-    for tier in (0, 1):
-        tier_names, tier_args, tier_refs = recheck_shortcut._served(tier)
-        names += tier_names
-        args += tier_args
-        refs.append(tier_refs)
-    refs = np.concatenate(refs)
     check32 = recheck_shortcut._values(shortcut.check, args, float32=True)
     print(f"{len(args)} designs", flush=True)
 

@@ -90,16 +90,21 @@ def _radial_counts(counts):
         _clear_host_caches()
 
 
+def _fig1_operands():
+    """The Fig. 1 point as the shortcut's grids take it: ``(aberrations without tilt, field,
+    u, signal, noise)``, float64."""
+    return (jj.Seidel(**common.FIG1).without_tilt(), jnp.float64(common.FIG1_FIELD),
+            jnp.float64(common.FIG1_U), common.fig1_signal(), common.fig1_noise())
+
+
 def _fig1_programs(grid):
     """AOT-compiled ``(coarse OTF, value with estimate)`` of ``grid`` at the Fig. 1 point."""
-    aberrations = jj.Seidel(**common.FIG1).without_tilt()
+    operands = _fig1_operands()
+    aberrations, field = operands[:2]
     options = {**jj.jmse_options(), **grid}
     coarse = _quadrature.polar_panels(common.FIG1_U, *grid["nodes"], jnp.float64)
-    field = jnp.float64(common.FIG1_FIELD)
     otf_args = (aberrations, coarse.nu_x, coarse.nu_y, field)
     otf = jax.jit(lambda a, x, y, f: _merit._polar_otf(a, x, y, f, options))
-    operands = (aberrations, field, jnp.float64(common.FIG1_U), common.fig1_signal(),
-                common.fig1_noise())
     static = _Static(options)
     whole = jax.jit(lambda ops: _compiled_estimated(static, jnp.dtype(jnp.float64), ops))
     return ((otf.lower(*otf_args).compile(), otf_args),
@@ -122,19 +127,12 @@ def _alternated(programs):
 
 def main():
     machine = common.machine_info()
-    shortcut = jj.DEFAULT_TIERS[1][3]
+    shortcut, names, args, refs, tiers = recheck_shortcut._shortcut_designs()
     first = shortcut.first
-    assert jj.DEFAULT_TIERS[0][3].first == first and jj.DEFAULT_TIERS[0][3].check == \
-        shortcut.check, "the two shortcuts no longer share their first and check grids"
     n_angular = first["nodes"][1]
-    names, args, refs, own = [], [], [], []
-    for tier in (0, 1):
-        tier_names, tier_args, tier_refs = recheck_shortcut._served(tier)
-        names += tier_names
-        args += tier_args
-        refs.append(tier_refs)
-        own.append(recheck_shortcut._values(jj.DEFAULT_TIERS[tier][2], tier_args))
-    refs, own = np.concatenate(refs), np.concatenate(own)
+    own = np.concatenate([recheck_shortcut._values(
+        jj.DEFAULT_TIERS[tier][2], [a for a, t in zip(args, tiers, strict=True) if t == tier])
+        for tier in (0, 1)])
     check32 = recheck_shortcut._values(shortcut.check, args, float32=True)
     own_error = np.abs(own / refs - 1.0)
     print(f"{len(args)} designs; tiers' own grids worst {own_error.max():.1e}", flush=True)

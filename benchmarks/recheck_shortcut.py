@@ -100,6 +100,24 @@ def _served(tier):
     return names, args, np.asarray(refs)
 
 
+def _shortcut_designs():
+    """``(shortcut, names, arguments, references, tiers)`` of the designs the default's two
+    shortcuts serve (tiers 0 and 1, which share their first and check grids), tier 0's
+    first."""
+    shortcut = jj.DEFAULT_TIERS[1][3]
+    assert jj.DEFAULT_TIERS[0][3].first == shortcut.first and \
+        jj.DEFAULT_TIERS[0][3].check == shortcut.check, \
+        "the two shortcuts no longer share their first and check grids"
+    names, args, refs, tiers = [], [], [], []
+    for tier in (0, 1):
+        tier_names, tier_args, tier_refs = _served(tier)
+        names += tier_names
+        args += tier_args
+        refs.append(tier_refs)
+        tiers += [tier] * len(tier_args)
+    return shortcut, names, args, np.concatenate(refs), np.asarray(tiers)
+
+
 def _values(grid, args, float32=False):
     def cast(tree):
         return jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float32), tree)
