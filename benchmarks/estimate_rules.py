@@ -21,7 +21,7 @@ present estimate, the worst error kept, the range of the estimate over the prese
 the present one exceeds 1e-7 and the check agrees, and the first grid's time at the Fig. 1
 point with the estimate, against its value alone, in alternated rounds.
 
-Usage (from the repository root; about 4 min; pinned to one core for steadier times)::
+Usage (from the repository root; about 1-2 min; pinned to one core for steadier times)::
 
     taskset -c 1 .venv/bin/python benchmarks/estimate_rules.py
 
@@ -30,7 +30,6 @@ Writes ``results/estimate_rules.json`` and ``.md``.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import sys
 import time
@@ -88,18 +87,10 @@ def _estimate(form, rule, h, u, signal, noise, total, options, dtype, ridges):
     return jnp.maximum(*change) / jnp.abs(total)
 
 
-@contextlib.contextmanager
 def _estimate_form(form, rule):
-    """Within the block, the library's estimate is ``_estimate(form, rule, ...)``; host and
-    jit caches are cleared on entry and exit."""
-    present = _merit._interpolation_estimate
-    radial_shares._clear_host_caches()
-    _merit._interpolation_estimate = functools.partial(_estimate, form, rule)
-    try:
-        yield
-    finally:
-        _merit._interpolation_estimate = present
-        radial_shares._clear_host_caches()
+    """A context in which the library's estimate is ``_estimate(form, rule, ...)``."""
+    return radial_shares._patched(_merit, "_interpolation_estimate",
+                                  functools.partial(_estimate, form, rule))
 
 
 def _fig1_program(grid, estimated):

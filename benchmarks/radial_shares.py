@@ -68,10 +68,23 @@ def _clear_host_caches():
 
 
 @contextlib.contextmanager
+def _patched(module, name, value):
+    """Within the block, ``module.name`` is ``value``. Host and jit caches are cleared on
+    entry and exit: both key on the grid's counts, not on the patched code."""
+    present = getattr(module, name)
+    _clear_host_caches()
+    setattr(module, name, value)
+    try:
+        yield
+    finally:
+        setattr(module, name, present)
+        _clear_host_caches()
+
+
+@contextlib.contextmanager
 def _radial_counts(counts):
     """Within the block, a polar rule of ``sum(counts)`` radial nodes has ``counts`` per
-    panel; every other rule keeps ``_quadrature._radial_counts``. Host and jit caches are
-    cleared on entry and exit, since both key on the node count only."""
+    panel; every other rule keeps ``_quadrature._radial_counts``."""
     present = _quadrature._radial_counts
     n = sum(counts)
 
@@ -81,13 +94,8 @@ def _radial_counts(counts):
     if tuple(counts) == present(n):
         yield
         return
-    _clear_host_caches()
-    _quadrature._radial_counts = patched
-    try:
+    with _patched(_quadrature, "_radial_counts", patched):
         yield
-    finally:
-        _quadrature._radial_counts = present
-        _clear_host_caches()
 
 
 def _fig1_operands():
