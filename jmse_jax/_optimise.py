@@ -34,7 +34,6 @@ from .lens import (
     paraxial_trace,
     rms_wavefront_error,
     solve_last_curvature,
-    validate_lens,
 )
 from .lens._paraxial import _raise_for, _status
 from .lens._seidel import _waves_from_traces
@@ -138,7 +137,7 @@ def lens_merit(
     fields, weights, wavelengths = _check_merit_arguments(
         dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options)
     if is_concrete(lens):
-        _raise_for(_status_jit(lens))
+        _check_lens_at(lens, wavelengths)
     if reference_scale is not None:
         check_range("reference_scale", reference_scale, 0.0, None, low_inclusive=False)
         reference_scale = jnp.asarray(reference_scale, dtype)
@@ -202,8 +201,20 @@ def _freeze(options) -> tuple:
 
 
 @eqx.filter_jit
-def _status_jit(lens):
-    return _status(lens, paraxial_trace(lens))
+def _status_jit(lens, wavelength=None):
+    return _status(lens, paraxial_trace(lens, wavelength))
+
+
+def _check_lens_at(lens, wavelengths):
+    """Raise ``ValueError`` when the concrete ``lens`` is non-physical at its reference
+    wavelength or at any of ``wavelengths`` (None: the reference only), naming the
+    wavelength."""
+    _raise_for(_status_jit(lens), lens)
+    for wl in [] if wavelengths is None else wavelengths:
+        try:
+            _raise_for(_status_jit(lens, wl), lens, wl)
+        except ValueError as error:
+            raise ValueError(f"at wavelength {float(wl)!r} µm: {error}") from None
 
 
 @eqx.filter_jit
@@ -229,7 +240,12 @@ def _merit_table(lens, merit, u, signal, noise, fields, wavelengths, reference_s
     monochromatic = wavelengths is None
     wavelengths = [lens.wavelength] if monochromatic else list(wavelengths)
     reference = paraxial_trace(lens)
+    traces = [reference if monochromatic else paraxial_trace(lens, wl) for wl in wavelengths]
+    # Valid at the reference wavelength and at every wavelength averaged over.
     ok = _status(lens, reference).ok
+    if not monochromatic:
+        for trace in traces:
+            ok = ok & _status(lens, trace).ok
     own_reference = reference_scale is None
     if own_reference:
         reference_scale = lens.wavelength * _f_number_of(reference)
@@ -243,8 +259,7 @@ def _merit_table(lens, merit, u, signal, noise, fields, wavelengths, reference_s
     tiered = _full_jmse_options(**jmse_options)["tiers"] is not None
 
     rows = []
-    for wl in wavelengths:
-        trace = reference if monochromatic else paraxial_trace(lens, wl)
+    for wl, trace in zip(wavelengths, traces, strict=True):
         aberrations = _waves_from_traces(lens, trace, reference, wl)
         aberrations = jax.tree_util.tree_map(
             lambda a: jnp.where(ok, a, jnp.zeros_like(a)), aberrations
@@ -431,11 +446,18 @@ class OptimisationResult:
     parameters : dict name -> float, the optimised variables [lens units]
     merit : str; value : float, the optimised objective (mean JMSE, or mean wavefront
         variance [waves²])
-    jmse : float, field-averaged JMSE of ``lens``; jmse_per_field : tuple of float
+    jmse : float, field-averaged JMSE of ``lens``, with ``u`` and the spectra referred to the
+        starting design's ``lambda N`` (``reference_scale``), as the optimiser saw it:
+        ``lens_merit(result.lens, reference_scale=result.reference_scale, ...)`` with the
+        same arguments gives it; ``+inf`` if the final design is non-physical (then
+        ``result`` says so); jmse_per_field : tuple of float
     rms_wavefront : float [waves], RMS over the fields of the RMS wavefront error
     start_jmse, start_rms_wavefront : float, the same for the starting design
     iterations : int; wall_time : float [s] (compilation included on the first call)
     result : str, the solver's termination message
+    solver : str; fields : tuple of float
+    reference_scale : float [µm], ``lambda N`` of the starting design (after any F-number
+        solve), the frequency unit of ``u`` and the spectra for every design of the run
     """
 
     solution: object
@@ -454,6 +476,7 @@ class OptimisationResult:
     result: str
     solver: str
     fields: tuple
+    reference_scale: float
 
     def summary(self) -> str:
         """A readable multi-line report of the optimised design."""
@@ -573,7 +596,7 @@ def optimise(
     if f_number is not None:
         check_range("f_number", f_number, 0.0, None, low_inclusive=False)
         last = f"curvatures[{lens.n_surfaces - 1}]"
-        if last in variables:
+        if _parse(last, lens) in parsed:
             raise ValueError(f"{last} is fixed by the f_number solve; remove it from variables")
         lens = solve_last_curvature(lens, f_number)
     scales = dict(scales or {})
@@ -593,7 +616,7 @@ def optimise(
     signal = MarkovSignal(1.0, 5.0) if signal is None else signal
     noise = WhiteNoise(1e-3) if noise is None else noise
     jmse_items = _freeze({"preset": "fast"} if jmse_options is None else jmse_options)
-    validate_lens(lens)
+    _check_lens_at(lens, wavelengths)
     reference_scale = lens.wavelength * _f_number_of(paraxial_trace(lens))
     problem = _Problem(
         parsed=parsed, merit=merit, jmse_items=jmse_items, scales=scale_vector,
@@ -615,6 +638,9 @@ def optimise(
             start = float(_get(lens, p))
             if low is not None and high is not None and not low < high:
                 raise ValueError(f"bounds[{name!r}] must satisfy low < high, got {(low, high)}")
+            if (low is not None and start < low) or (high is not None and start > high):
+                raise ValueError(f"the start's {name} = {start!r} lies outside bounds[{name!r}] "
+                                 f"= {(low, high)}; start inside the bounds")
             step = float(scale_vector[i])
             lower.append(-np.inf if low is None else (low - start) / step)
             upper.append(np.inf if high is None else (high - start) / step)
@@ -641,17 +667,21 @@ def optimise(
     weights = np.asarray(problem.field_weights)
 
     def report(design):
-        per_field, variances, _ = _report(
+        per_field, variances, ok = _report(
             design, problem.u, signal, noise, problem.fields, problem.wavelengths,
             problem.reference_scale, jmse_items,
         )
+        if not bool(ok):  # _report evaluated it unaberrated: say +inf, as lens_merit does
+            return tuple(math.inf for _ in weights), math.inf, math.inf, False
         per_field = tuple(float(v) for v in np.asarray(per_field))
         mean_jmse = float(np.sum(weights * np.asarray(per_field)) / np.sum(weights))
         variance = float(np.sum(weights * np.asarray(variances)) / np.sum(weights))
-        return per_field, mean_jmse, variance
+        return per_field, mean_jmse, variance, True
 
-    per_field, mean_jmse, variance = report(final)
-    _, start_jmse, start_variance = report(lens)
+    per_field, mean_jmse, variance, final_ok = report(final)
+    _, start_jmse, start_variance, _ = report(lens)
+    if not final_ok:
+        result += "; the final design is non-physical (lens_status(result.lens).ok is False)"
     value = mean_jmse if merit == "jmse" else variance
     return OptimisationResult(
         solution=solution, lens=final, start=lens, parameters=parameters, merit=merit,
@@ -660,4 +690,5 @@ def optimise(
         start_rms_wavefront=math.sqrt(start_variance), iterations=iterations,
         wall_time=wall_time, result=result, solver=solver_name,
         fields=tuple(float(f) for f in np.asarray(fields)),
+        reference_scale=float(problem.reference_scale),
     )

@@ -194,6 +194,8 @@ def sensor_frequencies(shape, u):
     """
     shape = _check_shape(shape)
     check_range("u", u, 0.0, U_MAX, low_inclusive=False)
+    if np.ndim(u) != 0:
+        raise ValueError(f"u must be a scalar, got shape {np.shape(u)}")
     dtype = common_dtype(u)
     u = jnp.asarray(u, dtype)
     k_y, k_x = (jnp.asarray(_fft_indices(n), dtype) for n in shape)

@@ -159,7 +159,10 @@ class SweepResult:
     def load(cls, path) -> SweepResult:
         """Read a result written by ``save``; equinox Modules such as ``Seidel`` come back as such.
 
-        Only NumPy's ``.npz`` reader is used (``allow_pickle=False``).
+        Only NumPy's ``.npz`` reader is used (``allow_pickle=False``), and the classes the
+        header names are rebuilt only when they are namedtuples or equinox Modules of
+        ``jmse_jax`` or of a module the caller has already imported (a file never makes
+        ``load`` import or call anything else).
         """
         path = Path(path)
         if not path.exists() and path.suffix != ".npz":
@@ -250,11 +253,30 @@ def _encode_tree(tree, name: str, arrays: dict) -> dict:
     )
 
 
-def _import_class(path: str):
-    module_name, qualname = path.split(":")
-    obj = importlib.import_module(module_name)
+def _import_class(path: str, kind: str):
+    """The namedtuple (``kind="namedtuple"``) or equinox Module class named ``module:qualname``.
+
+    A file is data, not code: a module is imported only when it belongs to ``jmse_jax``; any
+    other must already be imported by the caller (``sys.modules``), and the object found must
+    be a class of the expected kind (a crafted header could otherwise name any callable).
+    """
+    module_name, _, qualname = path.partition(":")
+    if module_name == "jmse_jax" or module_name.startswith("jmse_jax."):
+        obj = importlib.import_module(module_name)
+    elif module_name in sys.modules:
+        obj = sys.modules[module_name]
+    else:
+        raise ValueError(
+            f"the file names class {path!r}, whose module {module_name!r} is not imported; "
+            f"import it before loading (load never imports a module a file names, except "
+            f"jmse_jax's own)"
+        )
     for part in qualname.split("."):
-        obj = getattr(obj, part)
+        obj = getattr(obj, part, None)
+    expected = (isinstance(obj, type) and issubclass(obj, tuple) and hasattr(obj, "_fields")
+                if kind == "namedtuple" else isinstance(obj, type) and issubclass(obj, eqx.Module))
+    if not expected:
+        raise ValueError(f"the file names {path!r} as a {kind} class, which it is not")
     return obj
 
 
@@ -273,10 +295,12 @@ def _decode_tree(spec: dict, arrays: dict):
         return tuple(children)
     values = dict(zip(spec["fields"], children, strict=True))
     if node == "namedtuple":
-        return _import_class(spec["class"])(**values)
+        return _import_class(spec["class"], "namedtuple")(**values)
+    if node != "module":
+        raise ValueError(f"unknown node {node!r} in the file's header")
     # An equinox Module is a frozen dataclass: set its fields directly, without re-running
     # an __init__ that may not accept batched leaves (Zernike checks its shape).
-    cls = _import_class(spec["class"])
+    cls = _import_class(spec["class"], "module")
     module = object.__new__(cls)
     for key, value in values.items():
         object.__setattr__(module, key, value)
@@ -767,8 +791,8 @@ def sweep_jmse(
     -------
     SweepResult
         ``inputs`` is ``{"aberrations": ..., "field": ..., "u": ...}``. Designs with a
-        field outside ``[0, 1]`` or ``u`` outside ``(0, 1.5]`` get ``SweepStatus.INVALID``;
-        non-finite ones ``NONFINITE_INPUT`` (their value is ``+inf``).
+        field outside ``[0, 1]`` or ``u`` outside ``(0, 1.5]`` get ``SweepStatus.INVALID``
+        and non-finite ones ``NONFINITE_INPUT``; the value of both is ``+inf``.
 
     Examples
     --------
@@ -799,13 +823,16 @@ def sweep_jmse(
     field = np.asarray(field, float) if isinstance(field, (list, tuple)) else field
     u = np.asarray(u, float) if isinstance(u, (list, tuple)) else u
 
-    def merit(design):
-        return jmse(design["aberrations"], design["field"], design["u"], signal, noise,
-                    preset=preset, **options)
-
     def in_range(design):
         f, v = design["field"], design["u"]
         return (f >= 0.0) & (f <= 1.0) & (v > 0.0) & (v <= U_MAX)
+
+    def merit(design):
+        value = jmse(design["aberrations"], design["field"], design["u"], signal, noise,
+                     preset=preset, **options)
+        # An out-of-range design's value is +inf, as its status says, not a finite number
+        # that a filter on np.isfinite would keep.
+        return jnp.where(in_range(design), value, jnp.inf)
 
     batch = {"aberrations": aberrations, "field": field, "u": u}
     return sweep(merit, batch, grad=grad, valid=in_range, batch_size=batch_size,

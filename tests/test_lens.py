@@ -6,6 +6,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+import equinox as eqx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
@@ -305,7 +306,7 @@ NEGATIVE_POWER = dict(curvatures=[-0.05, 0.05], thicknesses=[2.0], media=[1.5, 1
 @pytest.mark.parametrize("spec, message", [
     (ZERO_POWER, "power must be positive"),
     (NEGATIVE_POWER, "power must be positive"),
-    (NEGATIVE_EDGE, "edge thickness must be >= 0"),
+    (NEGATIVE_EDGE, "gap thickness, on the axis and at the edge, must be >= 0"),
     (TIR, "total internal reflection"),
 ])
 def test_non_physical_lenses_raise(spec, message):
@@ -335,7 +336,86 @@ def test_non_physical_lens_under_jit_gives_status_not_nan():
     assert bool(ok)
 
 
+def test_negative_lens_with_f_number_under_jit_is_flagged():
+    """``with_f_number`` on a negative lens gives a negative pupil radius, which flips the
+    marginal ray: the image-space slope then looks like a positive lens's. The status must
+    still flag the design and the merit be +inf (it was valid with a finite merit)."""
+    @jax.jit
+    def radius_ok_merit(c1):
+        lens = jl.Singlet(c1, 1 / 200, 6.0, 1.6, stop_distance=5.0, f_number=4.0,
+                          field_angle=5.0)
+        status = jl.lens_status(lens)
+        return lens.ep_radius, status.ok, status.aperture_ok, jmse_jax.lens_merit(
+            lens, merit="rms")
+
+    radius, ok, aperture_ok, merit = radius_ok_merit(jnp.asarray(-1 / 60))
+    assert float(radius) < 0 and not bool(ok) and not bool(aperture_ok)
+    assert float(merit) == math.inf
+    radius, ok, aperture_ok, merit = radius_ok_merit(jnp.asarray(1 / 60))
+    assert float(radius) > 0 and bool(ok) and np.isfinite(float(merit))
+    flipped = eqx.tree_at(lambda lens: lens.ep_radius, spec_lens(), jnp.asarray(-5.0))
+    with pytest.raises(ValueError, match=r"ep_radius must be in \(0, inf\) mm, got -5.0"):
+        jl.validate_lens(flipped)
+
+
+def test_crossed_vertices_in_an_air_gap_are_flagged():
+    """A negative centre thickness whose edge stays positive (a gap thicker at the rim)."""
+    lens = jl.Lens([0.1, -0.05, 0.2, 0.1], [2.0, 0.5, 1.0], [1.6, 1.0, 1.7, 1.0],
+                   ep_radius=1.0, field_angle=5.0)
+    assert bool(jl.lens_status(lens).ok)
+
+    @jax.jit
+    def status_and_merit(gap):
+        crossed = jl.Lens(lens.curvatures, jnp.stack([jnp.asarray(2.0), gap, jnp.asarray(1.0)]),
+                          lens.media, ep_radius=1.0, field_angle=5.0)
+        status = jl.lens_status(crossed)
+        return status.ok, status.min_edge_thickness, jmse_jax.lens_merit(crossed, merit="rms")
+
+    ok, thinnest, merit = status_and_merit(jnp.asarray(-0.05))
+    assert not bool(ok) and float(thinnest) == pytest.approx(-0.05, rel=1e-12)
+    assert float(merit) == math.inf
+    ok, _, merit = status_and_merit(jnp.asarray(0.5))
+    assert bool(ok) and np.isfinite(float(merit))
+
+
+def test_merit_over_wavelengths_checks_every_wavelength():
+    """Valid at d, total internal reflection at F: the polychromatic merit refuses it (a
+    concrete lens) or gives +inf (traced), instead of averaging a non-physical design."""
+    lens = jl.Singlet(0.275, -0.0825, 3.0, jl.AbbeGlass(1.75, 25), stop_distance=0.0,
+                      ep_radius=1.5, field_angle=36.0)
+    assert bool(jl.lens_status(lens).ok)
+    assert not bool(jl.lens_status(lens, jl.FRAUNHOFER_F).ok)
+    wavelengths = [jl.FRAUNHOFER_F, jl.FRAUNHOFER_D]
+    with pytest.raises(ValueError, match=r"at wavelength 0\.486\d* µm: total internal"):
+        jmse_jax.lens_merit(lens, merit="rms", wavelengths=wavelengths)
+    traced = jax.jit(lambda design: jmse_jax.lens_merit(design, merit="rms",
+                                                        wavelengths=wavelengths))
+    assert float(traced(lens)) == math.inf
+    # A dispersion formula outside its range: Cauchy's n = a + b / lambda^2 below 1.
+    cauchy = jl.Singlet(0.05, -0.02, 3.0, jl.CauchyGlass(1.5, -0.05), ep_radius=1.5,
+                        field_angle=5.0)
+    assert float(cauchy.media[0].index(0.2)) == pytest.approx(0.25)
+    assert not bool(jl.lens_status(cauchy, 0.2).indices_ok)
+    with pytest.raises(ValueError, match=r"refractive indices must be in \[1, 4\], got "
+                                         r"\[1\.0, 0\.25, 1\.0\]"):
+        jmse_jax.lens_merit(cauchy, merit="rms", wavelengths=[0.2, jl.FRAUNHOFER_D])
+
+
+def test_surface_beyond_its_reach_is_named():
+    lens = jl.Lens([0.05, -0.3], [3.0], [1.5, 1.0], ep_radius=1.5, field_angle=5.0,
+                   conics=[5.0, 5.0])
+    # 1 - (1 + k) c^2 r^2 = 0 at r = 1 / (|c| sqrt(1 + k)) = 1.36083 mm
+    with pytest.raises(ValueError, match=r"surface 1 does not extend .* ends at 1\.36083 mm"):
+        jl.validate_lens(lens)
+
+
 def test_argument_validation_messages():
+    with pytest.raises(ValueError, match="curvatures must list at least one surface"):
+        jl.Lens([], [], [])
+    with pytest.raises(ValueError, match=r"f_number must be in \(0\.0, inf\], got 0\.0"):
+        jl.defocus_waves(0.1, 0.0, 0.5876)
+    with pytest.raises(ValueError, match=r"field must be in \[0\.0, 1\.0\], got 2\.0"):
+        jl.rms_wavefront_error(jmse_jax.Seidel(w222=1.0), 2.0)
     with pytest.raises(ValueError, match=r"ep_radius must be in \(0.0, inf\], got -1.0"):
         jl.Lens([0.01, -0.01], [1.0], [1.5, 1.0], ep_radius=-1.0)
     with pytest.raises(ValueError, match="field_angle"):

@@ -66,6 +66,11 @@ def test_jmse_optimal_design_beats_rms_optimal_design(jmse_optimum, rms_optimum)
     assert rms_optimum.result == "converged"
     start_jmse = float(lens_merit(start_design(), jmse_options=FAST))
     assert jmse_optimum.start_jmse == pytest.approx(start_jmse, rel=1e-12)
+    # result.jmse is the merit the optimiser saw: u and the spectra in the start's lambda N.
+    assert jmse_optimum.reference_scale == pytest.approx(0.5875618 * 4.6, rel=1e-12)
+    final = lens_merit(jmse_optimum.lens, reference_scale=jmse_optimum.reference_scale,
+                       jmse_options=FAST)
+    assert jmse_optimum.jmse == pytest.approx(float(final), rel=1e-12)
     assert jmse_optimum.jmse < 0.9 * start_jmse
     # Each design wins on its own merit, by a clear margin.
     assert jmse_optimum.jmse < 0.8 * rms_optimum.jmse
@@ -180,7 +185,7 @@ def test_non_physical_design_gives_inf_merit_and_finite_gradient():
     grad = jax.grad(merit)(jnp.asarray(0.3))
     assert float(grad) == 0.0
     bad = jl.Lens([0.2, -0.2], [0.3], [1.5, 1.0], ep_radius=1.5, field_angle=5.0)
-    with pytest.raises(ValueError, match="edge thickness"):
+    with pytest.raises(ValueError, match="gap thickness, on the axis and at the edge"):
         lens_merit(bad, merit="rms")
 
 
@@ -229,6 +234,11 @@ def test_optimise_argument_errors():
         optimise(lens, ("curvatures[5]",))
     with pytest.raises(ValueError, match="fixed by the f_number solve"):
         optimise(lens, ("curvatures[1]",), f_number=4.6)
+    with pytest.raises(ValueError, match="fixed by the f_number solve"):  # the same index
+        optimise(lens, ("curvatures[01]",), f_number=4.6)
+    with pytest.raises(ValueError, match=r"the start's image_shift = 0\.0 lies outside "
+                                         r"bounds\['image_shift'\] = \(0\.05, 0\.2\)"):
+        optimise(lens, ("image_shift",), merit="rms", bounds={"image_shift": (0.05, 0.2)})
     with pytest.raises(ValueError, match="bounds names"):
         optimise(lens, ("curvatures[0]",), merit="rms", bounds={"image_shift": (-1, 1)})
     with pytest.raises(ValueError, match="low < high"):

@@ -13,6 +13,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._numerics import check_range, is_concrete
 from ._surfaces import Lens, surface_sag
@@ -201,18 +202,26 @@ class LensStatus(eqx.Module):
 
     Attributes
     ----------
+    aperture_ok : bool, the entrance-pupil radius is positive (``with_f_number`` on a lens of
+        negative power makes it negative, which would flip the marginal ray and hide the sign
+        of the power)
+    indices_ok : bool, every medium's index lies in [1, 4] at this wavelength (a dispersion
+        formula can leave that range far from its reference wavelength)
     positive_power : bool, ``EFL > 0`` and working F-number ``< 1e6`` (a real image of the
         object at infinity)
     no_total_internal_reflection : bool, ``|n i / n'| < 1`` for the marginal and both rim
         rays at every surface (``i`` the paraxial incidence angle, taken as ``sin I``)
     surfaces_reached : bool, every surface exists out to the beam footprint
         (``1 - (1 + k) c² a² >= 0``, ``a = |y| + |y_bar|``)
-    edge_thickness_ok : bool, every axial gap keeps a non-negative edge thickness at the
-        larger footprint of its two surfaces
+    edge_thickness_ok : bool, every axial gap keeps a non-negative thickness on the axis and
+        at the edge (the larger footprint of its two surfaces)
     stop_ok : bool, the chief ray exists (the stop is not at an image of the object)
-    power : [1/mm], ``1 / EFL``; max_sine : largest ``|n i / n'|``; min_edge_thickness : [mm]
+    power : [1/mm], ``1 / EFL``; max_sine : largest ``|n i / n'|``; min_edge_thickness : [mm],
+    the smallest gap thickness, on the axis or at the edge
     """
 
+    aperture_ok: jax.Array
+    indices_ok: jax.Array
     positive_power: jax.Array
     no_total_internal_reflection: jax.Array
     surfaces_reached: jax.Array
@@ -226,7 +235,8 @@ class LensStatus(eqx.Module):
     def ok(self):
         """True when every check passes (array-valued under jit)."""
         return (
-            self.positive_power & self.no_total_internal_reflection & self.surfaces_reached
+            self.aperture_ok & self.indices_ok
+            & self.positive_power & self.no_total_internal_reflection & self.surfaces_reached
             & self.edge_thickness_ok & self.stop_ok
         )
 
@@ -248,14 +258,17 @@ def _status(lens: Lens, trace: ParaxialTrace) -> LensStatus:
                                           gap_radius)
         sag_back, back_ok = surface_sag(c[1:], lens.conics[1:], lens.aspheric4[1:], gap_radius)
         edge = lens.thicknesses + sag_back - sag_front
-        min_edge = jnp.min(edge)
+        # The centre too: where the edge is the thicker, crossed vertices leave it positive.
+        min_edge = jnp.minimum(jnp.min(edge), jnp.min(lens.thicknesses))
         reached = jnp.all(front_ok & back_ok)
     else:
         _, reached = surface_sag(c, lens.conics, lens.aspheric4, footprint)
         reached = jnp.all(reached)
         min_edge = jnp.asarray(jnp.inf, c.dtype)
     return LensStatus(
-        positive_power=-trace.n[-1] * trace.u[-1] > _MIN_IMAGE_SLOPE,
+        aperture_ok=lens.ep_radius > 0,
+        indices_ok=jnp.all((trace.n >= 1.0) & (trace.n <= 4.0)),
+        positive_power=(power > 0) & (-trace.n[-1] * trace.u[-1] > _MIN_IMAGE_SLOPE),
         no_total_internal_reflection=max_sine < 1.0,
         surfaces_reached=reached,
         edge_thickness_ok=min_edge >= 0.0,
@@ -278,10 +291,24 @@ def lens_status(lens: Lens, wavelength=None) -> LensStatus:
 def _raise_if_concrete(lens: Lens, trace: ParaxialTrace) -> None:
     if not is_concrete((lens, trace)):
         return
-    _raise_for(_status(lens, trace))
+    _raise_for(_status(lens, trace), lens)
 
 
-def _raise_for(status: LensStatus) -> None:
+def _raise_for(status: LensStatus, lens: Lens, wavelength=None) -> None:
+    """Raise ``ValueError`` for the first failed check of ``status`` (of ``lens`` traced at
+    ``wavelength``)."""
+    if not bool(status.aperture_ok):
+        raise ValueError(
+            f"ep_radius must be in (0, inf) mm, got {float(lens.ep_radius)!r} (with_f_number "
+            f"on a lens of negative power gives a negative radius)"
+        )
+    if not bool(status.indices_ok):
+        wl = lens.wavelength if wavelength is None else wavelength
+        indices = [round(float(n), 6) for n in lens.indices(wavelength)]
+        raise ValueError(
+            f"refractive indices must be in [1, 4], got {indices} at wavelength "
+            f"{float(wl)!r} µm (outside the glass model's range of validity)"
+        )
     if not bool(status.stop_ok):
         raise ValueError(
             "stop_position puts the stop at an image of the object (no chief ray); move it"
@@ -294,18 +321,32 @@ def _raise_for(status: LensStatus) -> None:
         )
     if not bool(status.no_total_internal_reflection):
         raise ValueError(
-            f"total internal reflection: the marginal/rim rays reach |n sin I / n'| = "
-            f"{float(status.max_sine)!r}, allowed [0, 1)"
+            f"total internal reflection: the paraxial marginal/rim rays reach |n i / n'| = "
+            f"{float(status.max_sine)!r} (i the paraxial incidence angle, standing for "
+            f"sin I), allowed [0, 1); at wide fields this can also mean that the field is "
+            f"beyond the paraxial model's reach (reduce field_angle)"
         )
     if not bool(status.surfaces_reached):
+        trace = paraxial_trace(lens, wavelength)
+        footprint = np.abs(np.asarray(trace.y)) + np.abs(np.asarray(trace.y_bar))
+        # As _status tests it: each gap at the larger footprint of its two surfaces.
+        radius = footprint.copy()
+        radius[:-1] = np.maximum(radius[:-1], footprint[1:])
+        radius[1:] = np.maximum(radius[1:], footprint[:-1])
+        c, k = np.asarray(lens.curvatures), np.asarray(lens.conics)
+        i = int(np.argmin(1.0 - (1.0 + k) * c**2 * radius**2))
         raise ValueError(
-            "a surface does not extend to the beam footprint (1 - (1 + k) c^2 a^2 < 0): "
-            "curvature too steep for the aperture and field"
+            f"surface {i} does not extend to the beam footprint: the marginal and chief "
+            f"rays need a semi-aperture of {radius[i]:.6g} mm there, but with curvature "
+            f"{c[i]:.6g} 1/mm and conic {k[i]:.6g} it ends at "
+            f"{1.0 / (abs(c[i]) * np.sqrt(max(1.0 + k[i], 1e-300))):.6g} mm (reduce the "
+            f"curvature, the aperture or the field)"
         )
     if not bool(status.edge_thickness_ok):
         raise ValueError(
-            f"edge thickness must be >= 0 mm, got {float(status.min_edge_thickness)!r} mm "
-            f"(increase the thickness or reduce the curvatures)"
+            f"gap thickness, on the axis and at the edge, must be >= 0 mm, got "
+            f"{float(status.min_edge_thickness)!r} mm (increase the thickness or reduce the "
+            f"curvatures)"
         )
 
 
@@ -316,5 +357,5 @@ def validate_lens(lens: Lens, wavelength=None) -> LensStatus:
     """
     status = lens_status(lens, wavelength)
     if is_concrete(status):
-        _raise_for(status)
+        _raise_for(status, lens, wavelength)
     return status

@@ -136,6 +136,8 @@ def defocus_waves(image_shift, f_number, wavelength):
     f_number : float > 0, working F-number
     wavelength : float [µm]
     """
+    check_range("f_number", f_number, 0.0, None, low_inclusive=False)
+    check_range("wavelength", wavelength, 0.2, 20.0)
     return image_shift / (8.0 * f_number**2) / (wavelength * 1e-3)
 
 
@@ -167,7 +169,7 @@ def seidel_waves(lens: Lens, wavelength=None, *, check: bool = True) -> Seidel:
     trace = paraxial_trace(lens, wavelength)
     reference = trace if monochromatic else paraxial_trace(lens)
     if check and is_concrete((lens, trace)):
-        _raise_for(_status(lens, trace))
+        _raise_for(_status(lens, trace), lens, None if monochromatic else wavelength)
     return _waves_from_traces(lens, trace, reference, wavelength)
 
 
@@ -210,8 +212,9 @@ def rms_wavefront_error(aberrations: Seidel, field):
     Parameters
     ----------
     aberrations : Seidel [waves]
-    field : float [fraction of full field]
+    field : float in [0, 1] [fraction of full field]
     """
+    check_range("field", field, 0.0, 1.0)
     h2 = field * field
     a = aberrations.w020 + (aberrations.w220 + 0.5 * aberrations.w222) * h2
     b = aberrations.w040

@@ -115,6 +115,8 @@ class Lens(eqx.Module):
         if curvatures.ndim != 1:
             raise ValueError(f"curvatures must be 1-D, got shape {tuple(curvatures.shape)}")
         n_surfaces = curvatures.shape[0]
+        if n_surfaces == 0:
+            raise ValueError("curvatures must list at least one surface, got none")
         media = tuple(media)
         if len(media) != n_surfaces:
             raise ValueError(
