@@ -16,7 +16,11 @@ import os
 import pathlib
 import subprocess
 import sys
+import tempfile
+import warnings
 
+from ._merit import U_MAX
+from ._numerics import check_range
 from ._reproduce import FIG1, FIG1_FIELD, FIG1_U
 from ._sweep import DEFAULT_ACCELERATOR_BATCH
 
@@ -42,6 +46,17 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(2, f"jmse-jax: error: {message}\n")
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Adds ``(default: X)`` to an option's help, unless the help already states its default
+    or there is none to state (``None``, a flag's ``False``)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "default" in text or action.default in (None, False):
+            return text
+        return super()._get_help_string(action)
 
 
 class UsageError(ValueError):
@@ -94,25 +109,130 @@ def _positive(name, value) -> float:
     return value
 
 
-def _check_out(path) -> None:
-    """``UsageError`` now, before any computation, when ``path`` cannot be written."""
+def _check_out(path, flag: str = "--out-json", folder: bool = False, files=()) -> None:
+    """``UsageError`` now, before any computation, when ``path`` cannot be written: a file, or
+    with ``folder`` a folder to write ``files`` into. Call it after every other argument is
+    checked. The folders missing on the way are made to try them and removed again (the
+    writers make them when they write), so a run that fails later leaves none behind."""
     if not path:
         return
-    directory = os.path.dirname(os.path.abspath(path))
+    target = os.path.abspath(path)
+    if folder:
+        if os.path.exists(target) and not os.path.isdir(target):
+            raise UsageError(f"{flag}: {path} exists and is not a folder")
+        taken = [name for name in files if os.path.isdir(os.path.join(target, name))]
+        if taken:
+            raise UsageError(f"{flag}: {os.path.join(path, taken[0])} is a folder, "
+                             "where a file is to be written")
+        directory = target
+    else:
+        if os.path.isdir(target):
+            raise UsageError(f"{flag}: {path} is a folder, not a file")
+        directory = os.path.dirname(target)
+    missing = []
+    probe = directory
+    while not os.path.exists(probe) and os.path.dirname(probe) != probe:
+        missing.append(probe)
+        probe = os.path.dirname(probe)
     try:
         os.makedirs(directory, exist_ok=True)
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+        if os.path.exists(target) and not folder and not os.access(target, os.W_OK):
+            raise PermissionError(13, "Permission denied")
     except OSError as e:
-        raise UsageError(f"--out-json: cannot create {directory} ({e.strerror})") from None
-    if os.path.isdir(path) or not os.access(directory, os.W_OK):
-        raise UsageError(f"--out-json: cannot write {path}")
+        raise UsageError(f"{flag}: cannot write {path} ({e.strerror})") from None
+    finally:
+        for made in missing:  # innermost first
+            try:
+                os.rmdir(made)
+            except OSError:
+                pass
+
+
+def _finite_or_null(data):
+    """``data`` with every non-finite float (``inf``, ``nan``) replaced by ``None``: strict
+    JSON has no infinities."""
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    if isinstance(data, dict):
+        return {k: _finite_or_null(v) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [_finite_or_null(v) for v in data]
+    return data
 
 
 def _write_json(path, data):
+    """Write ``data`` as strict JSON (non-finite numbers become ``null``)."""
     directory = os.path.dirname(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)
     with open(path, "w") as f:
-        json.dump(data, f, indent=2)
+        json.dump(_finite_or_null(data), f, indent=2, allow_nan=False)
     print(f"wrote {path}")
+
+
+def _strength_message(strength: float, beyond: int = 1, n: int = 1) -> str:
+    from ._merit import CHECKED_STRENGTH, CHECKED_STRENGTH_ONE_RAY
+
+    which = f"{strength:.3g}" if n == 1 else f"up to {strength:.3g} ({beyond} of {n} designs)"
+    return (f"aberration_strength {which} is beyond what the presets and the "
+            f"default's tiers were checked at ({CHECKED_STRENGTH:g}; "
+            f"{CHECKED_STRENGTH_ONE_RAY:g} for a rotationally symmetric design): the JMSE "
+            f"may be far off. Give grids sized for it (nodes, se_nodes, overlap_nodes; see "
+            f"jmse's docstring and the README) and compare two of them (are the coefficients "
+            f"in waves?)")
+
+
+def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int = 1024) -> list:
+    """The warnings ``jmse`` gives a concrete design, for designs that run under ``jit`` (where
+    it cannot give them): ``aberration_strength`` beyond ``CHECKED_STRENGTH`` and peak
+    ``S_x / S_n`` beyond ``CHECKED_SNR``. Leaves of shape (n,), one design per row; the
+    strength and symmetry of each come from the library's own choice of plan
+    (``_concrete_choice``), the noise check is the library's (``_warn_beyond_checked_snr``).
+    Each warning goes to stderr as one line; returns their texts."""
+    import functools
+
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from ._merit import (
+        CHECKED_STRENGTH,
+        CHECKED_STRENGTH_ONE_RAY,
+        _concrete_choice,
+        _prepare,
+        _warn_beyond_checked_snr,
+        jmse_options,
+    )
+
+    designs = (aberrations, field, u)
+    n = int(np.shape(field)[0])
+    static, _ = _prepare((*jax.tree_util.tree_map(lambda x: x[0], designs), signal, noise),
+                         jmse_options(preset))
+    choice = jax.jit(jax.vmap(functools.partial(_concrete_choice, static)))
+    size = min(n, chunk)
+    symmetric, strength = [], []
+    for start in range(0, n, size):  # fixed-size blocks: one compiled program
+        index = np.minimum(np.arange(start, start + size), n - 1)
+        block = jax.tree_util.tree_map(lambda x, index=index: x[index], designs)
+        _, sym, st = choice(*block)
+        symmetric.append(np.asarray(sym)[: n - start])
+        strength.append(np.asarray(st)[: n - start])
+    symmetric, strength = np.concatenate(symmetric), np.concatenate(strength)
+    beyond = strength > np.where(symmetric, CHECKED_STRENGTH_ONE_RAY, CHECKED_STRENGTH)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if beyond.any():
+            warnings.warn(_strength_message(float(strength[beyond].max()), int(beyond.sum()), n),
+                          UserWarning, stacklevel=2)
+        if not symmetric.all():  # the one-ray plans integrate the peaks in closed form
+            u_max = jnp.asarray(np.max(np.asarray(u)[~symmetric]), np.asarray(u).dtype)
+            _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=2,
+                                     peaks=jmse_options(preset)["peaks"])
+    texts = [" ".join(str(w.message).split()) for w in caught]
+    for text in texts:
+        print(f"jmse-jax: warning: {text}", file=sys.stderr, flush=True)
+    return texts
 
 
 # --------------------------------------------------------------------------------------
@@ -140,6 +260,13 @@ def eval_inputs(args) -> dict:
         if unknown:
             raise UsageError(f"--json {args.json}: unknown keys {unknown}; allowed: "
                              f"{', '.join(EVAL_KEYS)}")
+        for key in COEFFICIENTS + ("field", "u", "noise", "nu"):
+            value = data.get(key)
+            # bool is an int in Python, but true is no number of waves (docs/conventions.md).
+            if isinstance(value, bool) or (isinstance(value, list)
+                                           and any(isinstance(v, bool) for v in value)):
+                raise UsageError(f"--json {args.json}: {key} must be a number, "
+                                 f"got {json.dumps(value)}")
         settings.update(data)
     for key in EVAL_KEYS:
         value = getattr(args, key, None)
@@ -172,20 +299,28 @@ def eval_inputs(args) -> dict:
     return settings
 
 
+def eval_design(settings: dict) -> tuple:
+    """``(aberrations, field, u, signal, noise)`` of ``settings``, checked with the messages
+    ``jmse`` gives (under ``jit`` its checks see traced values)."""
+    import jmse_jax as jj
+    from jmse_jax._merit import _validate
+
+    ab = jj.Seidel(**{k: settings[k] for k in COEFFICIENTS})
+    signal, noise = parse_signal(settings["signal"]), jj.WhiteNoise(settings["noise"])
+    _validate(ab, settings["field"], settings["u"], signal, noise)
+    return ab, settings["field"], settings["u"], signal, noise
+
+
 def evaluate(settings: dict) -> dict:
     """JMSE, its gradient w.r.t. the Seidel coefficients, and the OTF for ``settings``."""
     import jax
     import numpy as np
 
     import jmse_jax as jj
-    from jmse_jax._merit import _validate
 
-    ab = jj.Seidel(**{k: settings[k] for k in COEFFICIENTS})
-    signal, noise = parse_signal(settings["signal"]), jj.WhiteNoise(settings["noise"])
-    field, u, preset = settings["field"], settings["u"], settings["preset"]
-    # Checked here, with the messages jmse gives: under jit its checks see traced values. One
-    # compiled program (kept by the compilation cache) serves every field, u and spectrum.
-    _validate(ab, field, u, signal, noise)
+    ab, field, u, signal, noise = eval_design(settings)
+    preset = settings["preset"]
+    # One compiled program (kept by the compilation cache) serves every field, u and spectrum.
     merit = jax.jit(jax.value_and_grad(jj.jmse), static_argnames="preset")
     value, grad = merit(ab, field, u, signal, noise, preset=preset)
     nu = np.asarray(settings["nu"], dtype=float)
@@ -204,8 +339,15 @@ def evaluate(settings: dict) -> dict:
 
 
 def _cmd_eval(args) -> int:
-    _check_out(args.out_json)
+    import jax
+    import numpy as np
+
     settings = eval_inputs(args)
+    ab, field, u, signal, noise = eval_design(settings)
+    _check_out(args.out_json)
+    # The jitted run below cannot give jmse's warnings for a concrete design: give them here.
+    warn_like_jmse(jax.tree_util.tree_map(lambda x: np.reshape(x, 1), ab), np.reshape(field, 1),
+                   np.reshape(u, 1), signal, noise, settings["preset"])
     result = evaluate(settings)
     inp = result["inputs"]
     print(f"JMSE (Wiener-restoration MSE), preset {inp['preset']}: field {inp['field']:g}, "
@@ -238,7 +380,6 @@ def _cmd_optimise(args) -> int:
     import jmse_jax as jj
     from jmse_jax import lens as jl
 
-    _check_out(args.out_json)
     lo, hi = jl.PAPER_SINGLET["front_curvature_range"]
     if not lo <= args.front_curvature <= hi:
         raise UsageError(f"--front-curvature must be in [{lo}, {hi}] 1/mm, "
@@ -248,8 +389,10 @@ def _cmd_optimise(args) -> int:
         raise UsageError(f"--stop-distance must be in [{lo}, {hi}] mm, got {args.stop_distance}")
     if args.max_steps < 1:
         raise UsageError(f"--max-steps must be a positive integer, got {args.max_steps}")
+    check_range("--u", args.u, 0.0, U_MAX, low_inclusive=False)
     signal = parse_signal(args.signal)
     noise = jj.WhiteNoise(_positive("--noise", args.noise))
+    _check_out(args.out_json)
     start = jl.paper_singlet(args.stop_distance, args.front_curvature,
                              image_shift=args.image_shift)
     print(f"paper singlet (F/{jl.PAPER_SINGLET['f_number']}, f = "
@@ -261,11 +404,23 @@ def _cmd_optimise(args) -> int:
                          signal=signal, noise=noise, f_number=jl.PAPER_SINGLET["f_number"],
                          max_steps=args.max_steps, jmse_options={"preset": args.preset})
     print(result.summary())
+    # The lens stores the stop's position on the axis (stop_position = -stop distance); report
+    # it as --stop-distance takes it.
+    final = dict(stop_distance_mm=-float(result.lens.stop_position),
+                 front_curvature_per_mm=float(result.lens.curvatures[0]),
+                 image_shift_mm=float(result.lens.image_shift))
+    print(f"  as the flags take them: --stop-distance {final['stop_distance_mm']:.8g} mm "
+          f"(stop to front vertex; stop_position above is the lens's axial coordinate of the "
+          f"stop, its negative), --front-curvature {final['front_curvature_per_mm']:.8g} "
+          f"1/mm, --image-shift {final['image_shift_mm']:.8g} mm")
     if args.out_json:
         _write_json(args.out_json, dict(
             start=dict(stop_distance_mm=args.stop_distance,
                        front_curvature_per_mm=args.front_curvature,
                        image_shift_mm=args.image_shift),
+            final=final,
+            parameters_convention="parameters: the lens's own variables; stop_position is the "
+            "axial coordinate of the stop [mm], -stop_distance_mm",
             merit=result.merit, preset=args.preset, u=args.u, signal=args.signal,
             noise=args.noise, parameters=result.parameters, value=result.value,
             jmse=result.jmse, jmse_per_field=list(result.jmse_per_field),
@@ -282,10 +437,11 @@ def _cmd_optimise(args) -> int:
 # --------------------------------------------------------------------------------------
 
 SWEEP_AXES = COEFFICIENTS + ("field", "u")
+SWEEP_FILES = ("sweep.npz", "sweep.json", "sweep_summary.json")
 
 
-def parse_axis(text: str) -> tuple[str, list[float]]:
-    """``NAME=MIN,MAX,N`` -> (name, N equally spaced values)."""
+def axis_spec(text: str) -> tuple[str, float, float, int]:
+    """``NAME=MIN,MAX,N`` -> ``(name, min, max, n)``, checked; no array is made."""
     name, sep, rest = str(text).partition("=")
     name = name.strip()
     if not sep or name not in SWEEP_AXES:
@@ -295,18 +451,33 @@ def parse_axis(text: str) -> tuple[str, list[float]]:
     if len(values) != 3 or values[2] != int(values[2]) or values[2] < 1:
         raise UsageError(f"--axis {name} needs MIN,MAX,N with N a positive integer, "
                          f"got {rest!r}")
+    return name, values[0], values[1], int(values[2])
+
+
+def parse_axis(text: str) -> tuple[str, list[float]]:
+    """``NAME=MIN,MAX,N`` -> (name, N equally spaced values)."""
     import numpy as np
 
-    return name, np.linspace(values[0], values[1], int(values[2])).tolist()
+    name, low, high, n = axis_spec(text)
+    return name, np.linspace(low, high, n).tolist()
 
 
-def _cmd_sweep(args) -> int:
-    import numpy as np
-
-    import jmse_jax as jj
-
-    axes = dict(parse_axis(a) for a in (args.axis or ["w020=-3,3,5", "w222=-1.5,1.5,3"]))
-    n = int(np.prod([len(v) for v in axes.values()]))
+def _check_sweep_arguments(args) -> dict[str, tuple[float, float, int]]:
+    """Every check of ``sweep``'s arguments, before any array or folder is made; returns the
+    axes as ``{name: (min, max, n)}``."""
+    if args.max_designs < 1:
+        raise UsageError(f"--max-designs must be a positive integer, got {args.max_designs}")
+    axes = {}
+    for text in args.axis or ["w020=-3,3,5", "w222=-1.5,1.5,3"]:
+        name, low, high, n = axis_spec(text)
+        if name in axes:
+            raise UsageError(f"--axis {name} is given twice; give each axis once")
+        # N against --max-designs before anything of size N exists.
+        if n > args.max_designs:
+            raise UsageError(f"--axis {name} has N = {n}, more than --max-designs "
+                             f"{args.max_designs}; lower N or raise --max-designs")
+        axes[name] = (low, high, n)
+    n = math.prod(spec[2] for spec in axes.values())
     if n > args.max_designs:
         raise UsageError(f"the grid has {n} designs, more than --max-designs "
                          f"{args.max_designs}; lower N or raise --max-designs")
@@ -314,6 +485,32 @@ def _cmd_sweep(args) -> int:
         raise UsageError(f"--batch-size must be a positive integer, got {args.batch_size}")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be a positive integer, got {args.workers}")
+    # The values eval refuses, refused here too (a sweep would mark every design INVALID).
+    for k in COEFFICIENTS:
+        if not math.isfinite(getattr(args, k)):
+            raise UsageError(f"--{k} must be finite, got {getattr(args, k)}")
+    check_range("--field", args.field, 0.0, 1.0)
+    check_range("--u", args.u, 0.0, U_MAX, low_inclusive=False)
+    for name, (low, high, _) in axes.items():
+        for end in (low, high):
+            if name == "field":
+                check_range("--axis field (MIN and MAX)", end, 0.0, 1.0)
+            elif name == "u":
+                check_range("--axis u (MIN and MAX)", end, 0.0, U_MAX, low_inclusive=False)
+    parse_signal(args.signal)
+    _positive("--noise", args.noise)
+    return axes
+
+
+def _cmd_sweep(args) -> int:
+    import numpy as np
+
+    import jmse_jax as jj
+
+    specs = _check_sweep_arguments(args)
+    _check_out(args.out, "--out", folder=True, files=SWEEP_FILES)
+    axes = {name: np.linspace(low, high, n).tolist() for name, (low, high, n) in specs.items()}
+    n = math.prod(len(v) for v in axes.values())
     cube = jj.hypercube(**axes)
     fixed = {k: getattr(args, k) for k in COEFFICIENTS}
 
@@ -325,13 +522,19 @@ def _cmd_sweep(args) -> int:
     u = numbers(cube.get("u", args.u))
     signal = parse_signal(args.signal)
     noise = jj.WhiteNoise(_positive("--noise", args.noise))
+    # Under vmap jmse cannot give its warnings for concrete designs: give them here.
+    every = np.zeros(n, dtype=args.dtype)
+    warn_like_jmse(jj.Seidel(**{k: every + getattr(ab, k) for k in COEFFICIENTS}),
+                   every + field, every + u, signal, noise, args.preset)
     print(f"sweep of {n} designs over {', '.join(f'{k} ({len(v)})' for k, v in axes.items())}; "
           f"preset {args.preset}, grad {args.grad}, {args.dtype}", flush=True)
     result = jj.sweep_jmse(ab, field, u, signal, noise, grad=args.grad, preset=args.preset,
                            batch_size=args.batch_size, workers=args.workers,
                            progress=not args.quiet,
-                           metadata=dict(axes=axes, fixed=fixed, signal=args.signal,
-                                         noise=args.noise, dtype=args.dtype,
+                           metadata=dict(axes=axes, fixed=dict(fixed, field=args.field,
+                                                               u=args.u),
+                                         signal=args.signal, noise=args.noise,
+                                         preset=args.preset, dtype=args.dtype, grad=args.grad,
                                          command="jmse-jax sweep"))
     path = result.save(os.path.join(args.out, "sweep.npz"))
     values = np.asarray(result.value)
@@ -341,9 +544,12 @@ def _cmd_sweep(args) -> int:
         best = int(np.argmin(np.where(ok, values, np.inf)))
         design = ", ".join(f"{k} = {cube[k][best]:g}" for k in axes)
         print(f"JMSE min {values[ok].min():.6e}, max {values[ok].max():.6e}; best: {design}")
-    summary = dict(n_designs=n, axes=axes, dtype=args.dtype, status_counts=result.status_counts(),
-                   jmse=values.tolist(), npz=str(path),
-                   seconds=result.metadata.get("wall_time_s"))
+    compile_s, run_s = result.metadata.get("compile_s"), result.metadata.get("run_s")
+    seconds = None if compile_s is None or run_s is None else compile_s + run_s
+    # A design that failed has JMSE +inf: written as null (strict JSON), see its status.
+    summary = dict(n_designs=n, axes=axes, preset=args.preset, dtype=args.dtype,
+                   status_counts=result.status_counts(), jmse=values.tolist(), npz=str(path),
+                   seconds=seconds, compile_s=compile_s, run_s=run_s)
     _write_json(os.path.join(args.out, "sweep_summary.json"), summary)
     print(f"wrote {path} and {path.with_suffix('.json')}")
     return 0
@@ -360,7 +566,7 @@ def benchmarks_folder() -> pathlib.Path:
 
 
 def builtin_bench(repeats: int = 5) -> dict:
-    """Warm time of ``jmse`` (each preset given) vs ``baseline_jmse`` B = 64, Fig. 1 point."""
+    """Warm time of ``jmse`` (the ``"fast"`` preset) vs ``baseline_jmse`` B = 64, Fig. 1 point."""
     import jax
 
     import jmse_jax as jj
@@ -410,6 +616,7 @@ def _cmd_bench(args) -> int:
 def _cmd_reproduce(args) -> int:
     from ._reproduce import run
 
+    _check_out(args.out, "--out", folder=True)
     run(args.out, quick=args.quick, log=lambda text: print(text, flush=True))
     return 0
 
@@ -433,7 +640,7 @@ def _add_spectra(parser, defaults: bool):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+    fmt = _HelpFormatter
     parser = _Parser(
         prog="jmse-jax",
         description="JMSE (Wiener-restoration MSE) merit for computational-imaging design. "
@@ -485,7 +692,8 @@ def build_parser() -> argparse.ArgumentParser:
     op.add_argument("--merit", choices=("jmse", "rms"), default="jmse",
                     help="JMSE or RMS wavefront [waves]")
     op.add_argument("--preset", choices=PRESET_NAMES, default="fast", help="jmse preset")
-    op.add_argument("--u", type=float, default=0.2, help="sensor Nyquist / optical cutoff")
+    op.add_argument("--u", type=float, default=0.2,
+                    help="sensor Nyquist / optical cutoff, in (0, 1.5]")
     _add_spectra(op, defaults=True)
     op.add_argument("--max-steps", type=int, default=200, help="solver step limit")
     op.add_argument("--out-json", metavar="FILE", help="write the result to FILE")
@@ -497,7 +705,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="JMSE over every combination of the given axes (jmse_jax.hypercube + "
         "sweep_jmse). Each --axis NAME=MIN,MAX,N gives N equally spaced values of NAME "
         f"({', '.join(SWEEP_AXES)}); the other coefficients take their flag values. Default "
-        "axes: w020=-3,3,5 and w222=-1.5,1.5,3 (waves). " + UNITS)
+        "axes: w020=-3,3,5 and w222=-1.5,1.5,3 (waves). Writes sweep.npz, its JSON header "
+        "sweep.json and sweep_summary.json, whose jmse list has null for a design that "
+        "failed (its status says why; strict JSON has no Infinity). " + UNITS)
     sw.add_argument("--axis", action="append", metavar="NAME=MIN,MAX,N",
                     help="a grid axis (repeatable); coefficients in waves")
     _add_coefficients(sw, default=0.0, what="held fixed when not an axis")
@@ -545,7 +755,7 @@ def build_parser() -> argparse.ArgumentParser:
         "quadrature rules at defocus -6 and -2.75 waves) and Fig. 4 left (RMS error [waves] "
         "of the wavefront rebuilt from L rings x K arms of polar samples, needs scipy), as "
         "PNG + JSON + markdown. "
-        "A few minutes on a 2-core CPU.")
+        "1-3 minutes on a 2-core CPU.")
     rep.add_argument("--out", default="jmse_output", help="output folder")
     rep.add_argument("--quick", action="store_true", help="coarse grids, for testing")
     rep.set_defaults(func=_cmd_reproduce)

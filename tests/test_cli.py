@@ -4,15 +4,18 @@ from __future__ import annotations
 
 import json
 import os
+import pathlib
+import re
 import subprocess
 import sys
+import types
 
 import numpy as np
 import pytest
 from conftest import FIG1_COEFFICIENTS
 
 import jmse_jax as jj
-from jmse_jax import cli
+from jmse_jax import _reproduce, cli, lens as jl
 
 FIG1_FLAGS = [f"--{k}={v}" for k, v in FIG1_COEFFICIENTS.items()]
 
@@ -25,6 +28,32 @@ def run_cli(capsys, *argv):
         status = e.code
     out, err = capsys.readouterr()
     return status, out, err
+
+
+class ComputationStarted(Exception):
+    """Raised by the stand-ins of ``no_computation``: the computation began."""
+
+
+@pytest.fixture
+def no_computation(monkeypatch):
+    """The subcommands' computations replaced by stand-ins that raise ``ComputationStarted``:
+    for checks that must come before anything is computed (or compiled)."""
+
+    def started(*args, **kwargs):
+        raise ComputationStarted
+
+    monkeypatch.setattr(cli, "evaluate", started)
+    monkeypatch.setattr(jj, "sweep_jmse", started)
+    monkeypatch.setattr(jj, "optimise", started)
+    monkeypatch.setattr(_reproduce, "run", started)
+
+
+def assert_one_line_error(status, err, *words):
+    assert status == 2, err
+    assert len(err.strip().splitlines()) == 1, err
+    assert err.startswith("jmse-jax: error: ")
+    for word in words:
+        assert word in err, (word, err)
 
 
 # --------------------------------------------------------------------------------------
@@ -100,6 +129,217 @@ def test_bench_without_benchmarks_folder_is_a_clear_error(capsys, monkeypatch, t
     assert status == 2 and "--builtin" in err
 
 
+@pytest.mark.parametrize("command", ["optimise", "sweep", "bench", "reproduce"])
+def test_help_states_each_default_once(capsys, command):
+    status, out, _ = run_cli(capsys, command, "--help")
+    assert status == 0
+    text = " ".join(out.split())
+    assert not re.search(r"\(default[^()]*\)\s*\(default", text), text
+    assert "(default: None)" not in text and "(default: False)" not in text
+
+
+def test_help_gives_ranges_and_the_same_run_time_as_the_readme(capsys):
+    _, out, _ = run_cli(capsys, "optimise", "--help")
+    assert "--u U sensor Nyquist / optical cutoff, in (0, 1.5]" in " ".join(out.split())
+    _, out, _ = run_cli(capsys, "reproduce", "--help")
+    assert "1-3 minutes on a 2-core CPU" in " ".join(out.split())
+    readme = (pathlib.Path(__file__).resolve().parent.parent / "README.md").read_text()
+    assert "reproduce.md (1-3 min)" in readme
+    # builtin_bench times the fast preset only, as its docstring says.
+    assert "each preset" not in cli.builtin_bench.__doc__
+    assert '"fast"' in cli.builtin_bench.__doc__
+
+
+@pytest.mark.parametrize("argv", [
+    ("sweep", "--axis", "w020=0,1,1e9"),  # once OOM-killed building the axis
+    ("sweep", "--axis", "w020=0,1,1e13"),  # once numpy's _ArrayMemoryError
+    ("sweep", "--axis", "w020=0,1,1e300"),
+    ("sweep", "--axis", "w020=0,1,20000", "--max-designs", "30000", "--axis",
+     "w222=0,1,20000"),
+    ("sweep", "--max-designs", "0"),
+])
+def test_sweep_refuses_a_large_axis_before_making_it(capsys, no_computation, argv):
+    status, _, err = run_cli(capsys, *argv)
+    assert_one_line_error(status, err, "--max-designs")
+
+
+@pytest.mark.parametrize("command", ["sweep", "reproduce"])
+@pytest.mark.parametrize("where", ["/proc/nope", "file", "file/sub"])
+def test_bad_out_exits_2_before_computing(capsys, tmp_path, no_computation, command, where):
+    (tmp_path / "file").write_text("taken")
+    out = where if where.startswith("/") else str(tmp_path / where)
+    status, _, err = run_cli(capsys, command, "--out", out)
+    assert_one_line_error(status, err, "--out", out)
+    assert "Errno" not in err
+
+
+def test_sweep_refuses_a_file_name_taken_by_a_folder(capsys, tmp_path, no_computation):
+    (tmp_path / "sweep_summary.json").mkdir()
+    status, _, err = run_cli(capsys, "sweep", "--out", str(tmp_path))
+    assert_one_line_error(status, err, "--out", "sweep_summary.json")
+
+
+@pytest.mark.parametrize("argv, words", [
+    (("--field", "2"), ("--field", "[0.0, 1.0]", "2.0")),
+    (("--field", "-0.1"), ("--field",)),
+    (("--u", "0"), ("--u", "(0.0, 1.5]")),
+    (("--u", "1.6"), ("--u",)),
+    (("--w040", "nan"), ("--w040", "finite")),
+    (("--w020", "inf"), ("--w020", "finite")),
+    (("--axis", "field=0,2,3"), ("--axis field", "[0.0, 1.0]")),
+    (("--axis", "field=-1,1,3"), ("--axis field",)),
+    (("--axis", "u=0,1,3"), ("--axis u", "(0.0, 1.5]")),
+    (("--axis", "u=0.1,2,3"), ("--axis u",)),
+])
+def test_sweep_refuses_what_eval_refuses(capsys, no_computation, argv, words):
+    status, _, err = run_cli(capsys, "sweep", *argv)
+    assert_one_line_error(status, err, *words)
+
+
+def test_sweep_refuses_a_repeated_axis(capsys, no_computation):
+    status, _, err = run_cli(capsys, "sweep", "--axis", "w020=0,1,3", "--axis", "w020=5,6,2")
+    assert_one_line_error(status, err, "--axis w020", "twice")
+
+
+def fake_sweep_jmse(aberrations, field, u, signal, noise, *, metadata, **options):
+    """A stand-in for ``sweep_jmse`` over a ``w020`` axis: the last design failed (JMSE +inf);
+    no computation."""
+    n = np.size(aberrations.w020)
+    value = np.arange(1.0, n + 1.0)
+    value[-1] = np.inf
+    status = np.zeros(n, np.int8)
+    status[-1] = jj.SweepStatus.NONFINITE_VALUE
+    return jj.SweepResult(inputs={"aberrations": aberrations, "field": field, "u": u},
+                          value=value, grad=None, aux=None, status=status,
+                          metadata=dict(compile_s=1.5, run_s=0.25, user=metadata))
+
+
+def refuse_infinity(name):
+    raise ValueError(f"not strict JSON: {name}")
+
+
+def test_sweep_summary_is_strict_json_with_the_time_and_the_preset(capsys, tmp_path,
+                                                                   monkeypatch):
+    monkeypatch.setattr(jj, "sweep_jmse", fake_sweep_jmse)
+    status, _, _ = run_cli(capsys, "sweep", "--axis", "w020=-1,1,3", "--preset", "default",
+                           "--dtype", "float32", "--quiet", "--out", str(tmp_path))
+    assert status == 0
+    summary = json.loads((tmp_path / "sweep_summary.json").read_text(),
+                         parse_constant=refuse_infinity)
+    assert summary["jmse"] == [1.0, 2.0, None]
+    assert summary["seconds"] == pytest.approx(1.75)
+    assert summary["preset"] == "default"
+    header = json.loads((tmp_path / "sweep.json").read_text(), parse_constant=refuse_infinity)
+    assert header["metadata"]["user"]["preset"] == "default"
+    assert header["metadata"]["user"]["dtype"] == "float32"
+
+
+# --------------------------------------------------------------------------------------
+# warnings of the library, one line each on stderr
+# --------------------------------------------------------------------------------------
+
+
+def warnings_of(err):
+    lines = err.strip().splitlines()
+    assert all(line.startswith("jmse-jax: warning: ") for line in lines), err
+    return lines
+
+
+@pytest.mark.parametrize("argv, start", [
+    (("eval", "--point", "fig1", "--noise", "1e-7"), "the peak signal-to-noise ratio"),
+    (("eval", "--point", "fig1", "--noise", "1e-7", "--preset", "high"),
+     "the peak signal-to-noise ratio"),
+    (("eval", "--w020", "1e6"), "aberration_strength"),
+    (("eval", "--point", "fig1", "--w131", "1e3"), "aberration_strength"),
+    (("sweep", "--axis", "w020=0,1e6,2"), "aberration_strength up to"),
+    (("sweep", "--axis", "w131=0,1,2", "--noise", "1e-7"), "the peak signal-to-noise ratio"),
+])
+def test_eval_and_sweep_give_the_library_warnings(capsys, no_computation, argv, start):
+    with pytest.raises(ComputationStarted):  # the warnings come before the computation
+        cli.main(list(argv))
+    lines = warnings_of(capsys.readouterr().err)
+    assert len(lines) >= 1 and lines[0].startswith("jmse-jax: warning: " + start), lines
+
+
+@pytest.mark.parametrize("argv", [
+    ("eval", "--point", "fig1"),
+    # Rotationally symmetric designs are exempt from the noise check (one-ray plans).
+    ("eval", "--w020", "2", "--noise", "1e-7"),
+    ("sweep", "--axis", "w020=-1,1,3", "--axis", "field=0,1,2", "--noise", "1e-7"),
+])
+def test_no_warning_where_jmse_gives_none(capsys, no_computation, argv):
+    with pytest.raises(ComputationStarted):
+        cli.main(list(argv))
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("data, key", [
+    ({"w020": True}, "w020"),
+    ({"noise": False}, "noise"),
+    ({"field": True}, "field"),
+    ({"nu": [0.1, True]}, "nu"),
+    ({"nu": True}, "nu"),
+])
+def test_eval_json_refuses_booleans(capsys, tmp_path, no_computation, data, key):
+    path = tmp_path / "in.json"
+    path.write_text(json.dumps(data))
+    status, _, err = run_cli(capsys, "eval", "--json", str(path))
+    assert_one_line_error(status, err, f"{key} must be a number")
+
+
+@pytest.mark.parametrize("argv", [
+    ("eval", "--out-json", "{new}/x.json", "--nu", "abc"),
+    ("eval", "--out-json", "{new}/x.json", "--field", "2"),
+    ("optimise", "--out-json", "{new}/x.json", "--u", "2"),
+    ("optimise", "--out-json", "{new}/x.json", "--signal", "markov:1"),
+    ("sweep", "--out", "{new}", "--u", "3"),
+    ("sweep", "--out", "{new}", "--axis", "w020=0,1"),
+])
+def test_bad_arguments_leave_no_folder_behind(capsys, tmp_path, no_computation, argv):
+    new = tmp_path / "new" / "sub"
+    status, _, err = run_cli(capsys, *(a.format(new=new) for a in argv))
+    assert_one_line_error(status, err)
+    assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.parametrize("argv", [
+    ("eval", "--out-json", "{new}/x.json"),
+    ("optimise", "--out-json", "{new}/x.json"),
+    ("sweep", "--out", "{new}"),
+    ("reproduce", "--out", "{new}"),
+])
+def test_checking_the_output_place_makes_no_folder(capsys, tmp_path, no_computation, argv):
+    """The writers make the folders when they write; a run that fails leaves none."""
+    new = tmp_path / "new" / "sub"
+    with pytest.raises(ComputationStarted):
+        cli.main([a.format(new=new) for a in argv])
+    assert not (tmp_path / "new").exists()
+
+
+def test_optimise_reports_the_stop_distance_as_its_flag_takes_it(capsys, tmp_path,
+                                                                 monkeypatch):
+    lens = jl.paper_singlet(1.186, 0.05, image_shift=0.01)
+
+    def fake_optimise(start, variables, **options):
+        parameters = {"stop_position": -1.186}
+        return types.SimpleNamespace(
+            summary=lambda: "optimise: (stand-in)\n  stop_position      = -1.186",
+            merit="jmse", parameters=parameters, value=1e-3, jmse=1e-3, jmse_per_field=[1e-3],
+            fields=[0.0], rms_wavefront=0.1, start_jmse=2e-3, start_rms_wavefront=0.2,
+            lens=lens, iterations=3, wall_time=0.1, result="successful", solver="bfgs")
+
+    monkeypatch.setattr(jj, "optimise", fake_optimise)
+    out_json = tmp_path / "opt.json"
+    status, out, _ = run_cli(capsys, "optimise", "--out-json", str(out_json))
+    assert status == 0
+    assert "--stop-distance 1.186 mm" in out
+    result = json.loads(out_json.read_text())
+    assert result["final"]["stop_distance_mm"] == pytest.approx(1.186)
+    assert result["final"]["image_shift_mm"] == pytest.approx(0.01)
+    assert result["parameters"]["stop_position"] == pytest.approx(-1.186)
+    assert "stop_position" in result["parameters_convention"]
+
+
 # --------------------------------------------------------------------------------------
 # eval
 # --------------------------------------------------------------------------------------
@@ -107,10 +347,10 @@ def test_bench_without_benchmarks_folder_is_a_clear_error(capsys, monkeypatch, t
 
 def test_eval_matches_library(capsys, tmp_path):
     out_json = tmp_path / "eval.json"
-    status, out, _ = run_cli(capsys, "eval", *FIG1_FLAGS, "--field", "0.95", "--u", "0.2",
-                             "--preset", "fast", "--nu", "0.1,0.2",
-                             "--out-json", str(out_json))
-    assert status == 0
+    status, out, err = run_cli(capsys, "eval", *FIG1_FLAGS, "--field", "0.95", "--u", "0.2",
+                               "--preset", "fast", "--nu", "0.1,0.2",
+                               "--out-json", str(out_json))
+    assert status == 0 and "warning" not in err
     result = json.loads(out_json.read_text())
     ab = jj.Seidel(**FIG1_COEFFICIENTS)
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
@@ -156,19 +396,23 @@ def test_optimise_reduces_the_merit(capsys, tmp_path):
     result = json.loads(out_json.read_text())
     assert result["jmse"] < result["start_jmse"]
     assert set(result["parameters"]) == {"image_shift"}
+    assert result["final"]["stop_distance_mm"] == pytest.approx(1.0)
+    assert result["final"]["image_shift_mm"] == pytest.approx(result["parameters"]["image_shift"])
 
 
 def test_sweep_writes_npz_and_json(capsys, tmp_path):
-    status, out, _ = run_cli(capsys, "sweep", "--axis", "w020=-1,1,3", "--axis",
-                             "field=0,1,2", "--w222", "0.5", "--quiet", "--workers", "2",
-                             "--out", str(tmp_path))
-    assert status == 0
+    status, out, err = run_cli(capsys, "sweep", "--axis", "w020=-1,1,3", "--axis",
+                               "field=0,1,2", "--w222", "0.5", "--quiet", "--workers", "2",
+                               "--out", str(tmp_path))
+    assert status == 0 and "warning" not in err
     result = jj.SweepResult.load(tmp_path / "sweep.npz")
     assert result.n_designs == 6 and result.ok.all()
     assert result.metadata["workers"] == 2
     assert (tmp_path / "sweep.json").is_file()
     summary = json.loads((tmp_path / "sweep_summary.json").read_text())
     assert summary["n_designs"] == 6
+    assert summary["seconds"] > 0 and summary["preset"] == "fast"
+    assert result.metadata["user"]["preset"] == "fast"
     # Second design: w020 = -1, field = 1 (last axis fastest).
     expected = float(jj.jmse(jj.Seidel(w020=-1.0, w222=0.5), 1.0, 0.2,
                              jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3), preset="fast"))
