@@ -1631,5 +1631,21 @@ def baseline_jmse(aberrations, field, u, signal, noise, B: int = 64):
     nu_x, nu_y = jnp.meshgrid(k / B, k / B, indexing="xy")
     band = (jnp.abs(nu_x) < u) & (jnp.abs(nu_y) < u)
     s_e = error_spectral_density(grid_otf, signal(nu_x, nu_y), noise(nu_x, nu_y))
-    value = jnp.sum(jnp.where(band, s_e, 0.0)) / (B * B) / (2.0 * math.pi)
+    total = jnp.sum(jnp.where(band, s_e, 0.0))
+    # For u > 1 the band reaches past the lag grid (|nu| < 1), where H = 0 and S_e = S_x:
+    # the same rectangle rule on the lags out to U_MAX (skipped when u <= 1).
+    total = total + jax.lax.cond(u > 1.0, functools.partial(_lags_past_the_grid, B),
+                                 lambda *_: jnp.zeros((), dtype), u, signal)
+    value = total / (B * B) / (2.0 * math.pi)
     return jnp.where(ok, value, jnp.inf)
+
+
+def _lags_past_the_grid(B, u, signal):
+    """``sum S_x`` over the integer lags ``k`` with ``|k_x|, |k_y| < u B`` outside the
+    baseline's lag grid ``[-B, B - 1]^2`` (there ``H = 0``, so ``S_e = S_x``)."""
+    reach = int(math.ceil(U_MAX * B))
+    k = jnp.arange(-reach, reach + 1, dtype=u.dtype)
+    kx, ky = jnp.meshgrid(k, k, indexing="xy")
+    band = (jnp.abs(kx) < u * B) & (jnp.abs(ky) < u * B)
+    on_grid = (kx >= -B) & (kx <= B - 1) & (ky >= -B) & (ky <= B - 1)
+    return jnp.sum(jnp.where(band & ~on_grid, signal(kx / B, ky / B), 0.0))

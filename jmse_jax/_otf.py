@@ -373,8 +373,9 @@ def _otf_nudft(aberrations, nu_x, nu_y, field, B):
     ex = jax.lax.complex(jnp.cos(ang_x), jnp.sin(ang_x))
     ey = jax.lax.complex(jnp.cos(ang_y), jnp.sin(ang_y))
     rows = jnp.matmul(ey, psf.astype(ex.dtype), precision=EXACT)  # (N, 2B): sum over y
-    values = jnp.sum(rows * ex, axis=1) / jnp.sum(psf)
-    return values.reshape(nu_x.shape)
+    values = (jnp.sum(rows * ex, axis=1) / jnp.sum(psf)).reshape(nu_x.shape)
+    # The sum is periodic in nu (period 2); the OTF vanishes past the cutoff.
+    return jnp.where(safe_norm(nu_x, nu_y) >= 1, jnp.zeros_like(values), values)
 
 
 def _otf_fft(aberrations, nu_x, nu_y, field, B):

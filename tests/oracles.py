@@ -141,9 +141,13 @@ def error_spectral_density(h, s_x, s_n):
 def baseline_jmse(coefficients: dict, field: float, u: float, signal_psd, noise_variance: float,
                   B: int) -> float:
     """The paper's baseline: lag-grid OTF, rectangle rule over the lags strictly inside
-    ``|nu_x|, |nu_y| < u``, ``sum S_e / B² / (2 pi)``. ``signal_psd(r)`` is ``S_x``."""
-    h = pupil_otf_lag_grid(coefficients, field, B)
-    k = np.fft.fftfreq(2 * B) * (2 * B)
+    ``|nu_x|, |nu_y| < u``, ``sum S_e / B² / (2 pi)``. ``signal_psd(r)`` is ``S_x``. For
+    ``u > 1`` the lags run past the ``2B`` grid (``-B .. B - 1``), where ``H = 0``."""
+    inner = np.fft.fftshift(pupil_otf_lag_grid(coefficients, field, B))  # lags -B .. B-1
+    reach = max(B, int(np.ceil(u * B)))
+    k = np.arange(-reach, reach + 1)
+    h = np.zeros((k.size, k.size), complex)
+    h[reach - B:reach + B, reach - B:reach + B] = inner
     nu_x, nu_y = np.meshgrid(k / B, k / B)
     band = (np.abs(nu_x) < u) & (np.abs(nu_y) < u)
     s_x = signal_psd(np.hypot(nu_x, nu_y))

@@ -48,6 +48,28 @@ def test_baseline_equals_numpy_oracle(case, B):
     assert got == pytest.approx(expected, rel=1e-12)
 
 
+@pytest.mark.parametrize("u", [1.2, 1.5])
+def test_baseline_past_the_cutoff(u):
+    """For u > 1 the band reaches past the lag grid (|nu| < 1), where S_e = S_x; the baseline
+    counts those lags too (it dropped them: -17 % and -28 % whatever B). Against the NumPy
+    oracle, and, for the unaberrated pupil, against the band integral by dblquad."""
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    got = float(jj.baseline_jmse(jj.Seidel(), 0.0, u, signal, noise, B=32))
+    expected = oracles.baseline_jmse({}, 0.0, u, lambda r: oracles.markov_psd(r, 1.0, 5.0),
+                                     1e-3, 32)
+    assert got == pytest.approx(expected, rel=1e-12)
+
+    def s_e(x, y):
+        r = math.hypot(x, y)
+        h = oracles.diffraction_limited_otf(r) if r < 1 else 0.0
+        s_x = oracles.markov_psd(r, 1.0, 5.0)
+        return s_x * 1e-3 / (h * h * s_x + 1e-3)
+
+    exact = oracles.square_integral(s_e, u, tol=1e-10) / (2.0 * math.pi)
+    fine = float(jj.baseline_jmse(jj.Seidel(), 0.0, u, signal, noise, B=256))
+    assert abs(fine / exact - 1) < 3e-3
+
+
 def test_baseline_warns_when_the_band_spans_few_lags(fig1):
     """u * B < 5 lags per half-band: the rectangle rule is far off, and the caller is told."""
     with pytest.warns(UserWarning, match=r"u \* B = 1 lags.*B = 5.*Use B >= 25"):

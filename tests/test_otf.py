@@ -159,7 +159,7 @@ def test_hermitian_and_x_mirror_symmetry(method):
                                atol=1e-12)
 
 
-@pytest.mark.parametrize("method", ["overlap", "fft"])
+@pytest.mark.parametrize("method", ["overlap", "fft", "nudft"])
 def test_zero_beyond_cutoff_and_one_at_origin(method):
     nodes = np.array([(1.0, 0.0), (0.0, -1.0), (0.8, 0.6), (1.2, 0.3), (-0.9, 0.9), (0.0, 0.0)])
     h = _otf(FIG1_ALL, points=nodes, method=method, B=32)
