@@ -67,9 +67,10 @@ __all__ = [
 #: Largest Nyquist ratio accepted: at u = 1.5 the band's corners lie past the cutoff.
 U_MAX = 1.5
 
-#: The largest ``aberration_strength`` at which the presets' accuracy was checked (the
-#: default's tiers are calibrated up to about this; README, "The adaptive default"). A
-#: concrete design beyond it gets a ``UserWarning`` from ``jmse``.
+#: The largest ``aberration_strength`` at which the default's tiers (and ``"high"``) were
+#: checked (README, "The adaptive default"). A concrete design beyond it gets a
+#: ``UserWarning`` from ``jmse``. ``"fast"`` has no bound of its own: it is percent-level off
+#: on some designs well inside this (README, "Accuracy and speed").
 CHECKED_STRENGTH = 25.0
 #: The same for rotationally symmetric designs, which take the one-ray plans (README).
 CHECKED_STRENGTH_ONE_RAY = 45.0
@@ -181,14 +182,26 @@ _SHORTCUT = TierShortcut(trial=None, check=_CHECK_GRID, rtol=1e-5, u_max=_REACHE
 #: 2026-11-25 tier 3's again, 32 -> 24 (worst error 8.4e-5 unchanged, largest change
 #: 5.8e-7; 16 failed in tiers 1 and 2: 6.2e-5 and 8.2e-4). Across the chords (the first
 #: entry) the order binds and stays.
+#: Those random designs never put the whole strength into one term. On 2026-11-29 designs of
+#: a single strong term (outside the calibration's +-8-wave box, inside the checked strength)
+#: found tiers 2 and 3 far short (``benchmarks/single_term_tiers.py``): pure coma, whose
+#: phase difference varies along the overlap chords (defocus's does not), 3.3e-3 off at
+#: strength 14.5 and 6e-2 at 24.5 (u = 0.3), for want of order along the chords; strong
+#: astigmatism up to 7e-4, for want of fine radial S_e nodes and angular OTF nodes; and
+#: defocus on the axis 1.3e-2 off at strength 44, whose one-ray plan takes its coarse count
+#: from tier 3's radial count. Tiers 2 and 3 became (64, 40) / (4800, 128) / (40, 32) and
+#: (96, 48) / (4800, 256) / (56, 40): worst 3e-4 on those 32 designs (24.7 waves of coma at
+#: u = 0.3; 9.4e-5 for the rest, the astigmatic ones at the 4800 radial nodes' own error),
+#: 3.5e-5 on the axis up to strength 44, and 9.8e-7 and 2.8e-8 (were 1.3e-5 and 8.4e-5) on
+#: the stored calibration designs of the two tiers, at 1.8x and 2.6x their time.
 DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
     (1.0, 0.5, _TIER0_GRID, _SHORTCUT),
     (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 24),
                          overlap_floor=_WEAK_FLOOR),
      _SHORTCUT),
-    (15.0, _REACHES_CUTOFF_U, dict(nodes=(56, 28), se_nodes=(2400, 128), overlap_nodes=(40, 24)),
+    (15.0, _REACHES_CUTOFF_U, dict(nodes=(64, 40), se_nodes=(4800, 128), overlap_nodes=(40, 32)),
      None),
-    (math.inf, math.inf, dict(nodes=(80, 32), se_nodes=(2400, 256), overlap_nodes=(56, 24)),
+    (math.inf, math.inf, dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(56, 40)),
      None),
 )
 
@@ -214,7 +227,9 @@ _PRESET_ONLY = ("tiers", "radial")
 PRESETS: dict[str, dict] = {
     # 16 overlap nodes along the chords (20 until 2026-11-25): the same worst error on the
     # bank (3.1e-2) and on 40 random designs of the paper's singlet space against ``high``
-    # (2.7e-5); its one-ray plan keeps 24 (``_radial._MIN_ALONG``).
+    # (2.7e-5); its one-ray plan keeps 24 (``_radial._MIN_ALONG``). No accuracy bound: on
+    # the stored calibration designs its worst error is 1.8e-3 at strength 1-3 and 1.4e-2
+    # at 3-5 (README); for an optimiser's steps and a sweep's survey.
     "fast": dict(
         quadrature="polar", nodes=(24, 16), se_nodes=(400, 120), otf_method="overlap",
         overlap_nodes=(28, 16), tiers=None, radial=True,
@@ -326,6 +341,12 @@ def _validate(aberrations, field, u, signal, noise):
         raise TypeError(f"signal must be a jmse_jax signal model, got {type(signal)}")
     if not isinstance(noise, AbstractNoise):
         raise TypeError(f"noise must be a jmse_jax noise model, got {type(noise)}")
+    for name, spectrum in (("signal", signal), ("noise", noise)):
+        for path, leaf in jax.tree_util.tree_flatten_with_path(spectrum)[0]:
+            if np.ndim(leaf) != 0:
+                raise ValueError(
+                    f"{name}{jax.tree_util.keystr(path)} must be a scalar (one design; "
+                    f"vmap over designs), got shape {np.shape(leaf)}")
 
 
 def _sanitise(inputs):
@@ -388,9 +409,10 @@ def _polar_otf(aberrations, nu_x, nu_y, field, options):
     parts, start = [], 0
     for count, t_max, order in _panel_overlap_orders(options, nu_x.shape[-1]):
         stop = start + count
+        remat = options.get("_remat_otf", False)
         parts.append(_otf_overlap(aberrations, nu_x[..., start:stop], nu_y[..., start:stop],
                                   field, order,
-                                  remat=options.get("_remat_otf", False) and t_max < 1))
+                                  remat=remat == "all" or (bool(remat) and t_max < 1)))
         start = stop
     return jnp.concatenate(parts, axis=-1)
 
@@ -811,18 +833,25 @@ class _Static:
         return isinstance(other, _Static) and self._key == other._key
 
 
+#: How the two strongest tiers' reverse passes treat their overlap blocks (``_remat_otf``):
+#: ``"all"`` recomputes every radial panel's blocks, ``True`` the inner panels' only.
+_REMAT_OTF = "all"
+
+
 def _tier_plans(options, tiers):
     """Each tier's full option set and its shortcut's ``(trial, check, rtol, u_max, first,
     first_tol)`` (or None; a grid not given is None).
 
-    The last (finest) tier's reverse pass recomputes the overlap blocks of its inner radial
-    panels (``_remat_otf``) instead of storing their chord moments. All tiers share one
-    executable whose scratch is sized for the largest branch; with all of the last tier's
-    moments stored it was 41 MB, above the ~32 MB at which XLA's CPU runtime maps scratch
-    afresh on every call and pays a page fault per 4 kB, and every design paid it. The inner
-    panels hold about half the moments and a third of the OTF work, so the scratch falls to
-    27 MB for about 13 % more CPU time on the last tier's value_and_grad
-    (benchmarks/README.md, optimisation log).
+    The two strongest tiers' reverse passes recompute their overlap blocks (``_remat_otf``,
+    ``_REMAT_OTF``) instead of storing their chord moments. All tiers share one executable
+    whose scratch is sized for the largest branch, and above about 32 MB XLA's CPU runtime
+    maps scratch afresh on every call and pays a page fault per 4 kB, which every design
+    then pays, the Fig. 1 point's shortcut included. With the last tier's inner panels
+    recomputed the value_and_grad scratch was 26 MB until tiers 2 and 3 grew on
+    2026-11-29 (``DEFAULT_TIERS``); then it was 53 MB and the Fig. 1 point's value_and_grad
+    went from 3.1 to 5.6 ms (Intel VM, ``ab_compare.py``). Recomputing every panel of both
+    tiers brings it to 23 MB and the Fig. 1 point back to 3.1 ms, at about 3x the time of
+    those tiers' value_and_grad (benchmarks/README.md, optimisation log).
     """
     plans = []
     for i, (_, _, grid, shortcut) in enumerate(tiers):
@@ -842,8 +871,8 @@ def _tier_plans(options, tiers):
                      else {**options, **shortcut.first, "peaks": False},
                      float(shortcut.first_tol))
         full = {**options, **grid}
-        if i == len(tiers) - 1:
-            full["_remat_otf"] = True
+        if i >= len(tiers) - 2:
+            full["_remat_otf"] = _REMAT_OTF
         plans.append((full, short))
     return tuple(plans)
 

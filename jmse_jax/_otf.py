@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._aberrations import AbstractAberrations
+from ._aberrations import AbstractAberrations, Seidel
 from ._chords import chord_integral
 from ._numerics import (
     EXACT,
@@ -82,6 +82,15 @@ def _check_aberrations(aberrations, field):
         )
     check_finite_tree("aberrations", aberrations)
     check_range("field", field, 0.0, 1.0)
+    named = [("field", field)]
+    if isinstance(aberrations, Seidel):
+        named += [(f"aberrations.{name}", getattr(aberrations, name))
+                  for name in Seidel.__dataclass_fields__]
+    for name, value in named:
+        if np.ndim(value) != 0:
+            raise ValueError(f"{name} must be a scalar (one design; the frequencies may be "
+                             f"arrays, designs go through jax.vmap), got shape "
+                             f"{np.shape(value)}")
 
 
 # --------------------------------------------------------------------------------------

@@ -38,6 +38,17 @@ CASES = [
     (lambda: jj.MarkovSignal("1.0", 5.0), TypeError,
      r"variance must be a real number \(or array of them\), got '1\.0'"),
     (lambda: jj.WhiteNoise("1e-3"), TypeError, r"noise variance must be a real number"),
+    # Spectra and designs with array parameters: one design per call (vmap for many).
+    (lambda: jj.jmse(jj.Seidel(), 0.3, 0.2, jj.MarkovSignal(1.0, 5.0),
+                     jj.WhiteNoise(jnp.array([1e-3, 1e-2]))), ValueError,
+     r"noise\.variance must be a scalar \(one design; vmap over designs\), got shape \(2,\)"),
+    (lambda: jj.baseline_jmse(jj.Seidel(), 0.3, 0.2, jj.MarkovSignal(jnp.array([1.0, 2.0]), 5.0),
+                              jj.WhiteNoise(1e-3)), ValueError,
+     r"signal\.variance must be a scalar \(one design; vmap over designs\), got shape"),
+    (lambda: jj.otf(jj.Seidel(), 0.2, 0.0, jnp.array([0.1, 0.2, 0.3])), ValueError,
+     r"field must be a scalar \(one design; the frequencies may be arrays"),
+    (lambda: jj.otf(jj.Seidel(w020=jnp.array([0.1, 0.2])), 0.2, 0.0, 0.5), ValueError,
+     r"aberrations\.w020 must be a scalar \(one design"),
 ]
 
 

@@ -271,6 +271,22 @@ def test_shortcut_keeps_the_middle_tier_accurate(ab, field, u, name):
     assert abs(value - reference) <= 1e-5 * reference
 
 
+@pytest.mark.parametrize("w131, tier", [(14.647, 2), (19.193, 3)])
+def test_strong_coma_alone_is_accurate(w131, tier):
+    """One strong term, outside the calibration's +-8-wave box: pure coma at full field,
+    u = 0.3, strength 14.5 and 19. Its phase difference varies along the overlap lens's
+    chords, which the tiers' order along them must follow (with 24 nodes the default was
+    3.3e-3 and 2.4e-2 off; ``benchmarks/single_term_tiers.py``). Against a grid with every
+    overlap order far past the tiers' (it agrees with a reference of (160, 96) / (8000,
+    1920) / (96, 96) to 2e-11)."""
+    ab = jj.Seidel(w131=w131)
+    assert int(_tier_index(_strength(ab, 1.0, 0.3), 0.3, jj.DEFAULT_TIERS)) == tier
+    value = float(jmse_fn()(ab, 1.0, 0.3, SIGNAL, NOISE))
+    reference = float(jmse_fn(nodes=(96, 48), se_nodes=(2400, 256), overlap_nodes=(96, 72))(
+        ab, 1.0, 0.3, SIGNAL, NOISE))
+    assert abs(value / reference - 1) < 1e-4
+
+
 #: The default's value and gradient in the coefficients, every input traced: the program
 #: the README's example and other test modules compile (``tests/compiled.py``).
 _default_value_and_grad = jmse_value_and_grad_fn()
