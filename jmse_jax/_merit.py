@@ -193,7 +193,8 @@ _SHORTCUT = TierShortcut(trial=None, check=_CHECK_GRID, rtol=1e-5, u_max=_REACHE
 #: (96, 48) / (4800, 256) / (56, 40): worst 3e-4 on those 32 designs (24.7 waves of coma at
 #: u = 0.3; 9.4e-5 for the rest, the astigmatic ones at the 4800 radial nodes' own error),
 #: 3.5e-5 on the axis up to strength 44, and 9.8e-7 and 2.8e-8 (were 1.3e-5 and 8.4e-5) on
-#: the stored calibration designs of the two tiers, at 1.8x and 2.6x their time.
+#: the stored calibration designs of the two tiers, at 1.8x and 2.6x their grids' time
+#: alone and 2.3-5.3x in the default (benchmarks/README.md, optimisation log, session 54).
 DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
     (1.0, 0.5, _TIER0_GRID, _SHORTCUT),
     (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 24),
@@ -1641,7 +1642,8 @@ def baseline_jmse(aberrations, field, u, signal, noise, B: int = 64):
     ``2B x 2B``, FFT to the PSF, FFT to the OTF (lags ``nu = k / B``), then the rectangle
     rule ``(1/B)**2 sum S_e`` over the lags strictly inside the band ``|nu_x|, |nu_y| < u``,
     divided by ``2 pi``. Converges erratically (first order in ``1/B``): about -8 % at
-    ``B = 64`` on the paper's Fig. 1 point.
+    ``B = 64`` on the paper's Fig. 1 point. For ``u > 1`` the band reaches past the lag grid
+    (``|nu| < 1``); the rule then runs on over the lags out to ``u``, where ``H = 0``.
 
     Parameters are as in ``jmse``; ``B`` is the pupil grid size (``>= 1``). Bad concrete
     input raises ``ValueError``; under ``jit`` non-finite or out-of-range values give
