@@ -300,8 +300,10 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
 
 
 def _pair(name, value):
-    if isinstance(value, (int,)) and not isinstance(value, bool):
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
         value = (value, value)
+    if isinstance(value, np.ndarray) and value.shape == (2,):  # as frequency_quadrature takes
+        value = tuple(value.tolist())
     if not (isinstance(value, (tuple, list)) and len(value) == 2):
         raise ValueError(f"{name} must be an int or a pair of ints, got {value!r}")
     check_count(f"{name}[0]", value[0])
@@ -328,6 +330,8 @@ def _check_one_design(aberrations, field, u):
         named += [(f"aberrations.{name}", getattr(aberrations, name))
                   for name in Seidel.__dataclass_fields__]
     for name, value in named:
+        if value is None:  # an empty pytree: no check would see it
+            raise TypeError(f"{name} must be a real number, got None")
         shape = tuple(value.shape) if hasattr(value, "shape") else np.shape(value)
         if shape != ():
             raise ValueError(

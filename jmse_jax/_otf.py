@@ -87,6 +87,8 @@ def _check_aberrations(aberrations, field):
         named += [(f"aberrations.{name}", getattr(aberrations, name))
                   for name in Seidel.__dataclass_fields__]
     for name, value in named:
+        if value is None:  # an empty pytree: no check would see it
+            raise TypeError(f"{name} must be a real number, got None")
         if np.ndim(value) != 0:
             raise ValueError(f"{name} must be a scalar (one design; the frequencies may be "
                              f"arrays, designs go through jax.vmap), got shape "

@@ -49,6 +49,11 @@ CASES = [
      r"field must be a scalar \(one design; the frequencies may be arrays"),
     (lambda: jj.otf(jj.Seidel(w020=jnp.array([0.1, 0.2])), 0.2, 0.0, 0.5), ValueError,
      r"aberrations\.w020 must be a scalar \(one design"),
+    (lambda: jj.jmse(jj.Seidel(w131=None), 0.3, 0.2, jj.MarkovSignal(1.0, 5.0),
+                     jj.WhiteNoise(1e-3)), TypeError,
+     r"aberrations\.w131 must be a real number, got None"),
+    (lambda: jj.otf(jj.Seidel(w222=None), 0.2, 0.0, 0.5), TypeError,
+     r"aberrations\.w222 must be a real number, got None"),
 ]
 
 
@@ -68,6 +73,9 @@ def test_good_input_still_passes():
     fit = jj.zernike_fit(np.zeros(jj.PolarGrid().x.shape), jj.PolarGrid(), noll=jnp.arange(1, 6))
     assert fit.noll == (1, 2, 3, 4, 5)
     assert jj.frequency_quadrature("polar", 0.3, np.array([8, 6]))[0].shape == (192,)
+    # jmse's grid sizes as NumPy integers or an integer array, as frequency_quadrature takes
+    assert jj.jmse_options(nodes=np.int64(30))["nodes"] == (30, 30)
+    assert jj.jmse_options(nodes=np.array([24, 16]))["nodes"] == (24, 16)
     nu_x, _, weights = jj.frequency_quadrature("polar", 0.2, 4)
     assert nu_x.shape == weights.shape == (64,)
     assert float(np.sum(weights)) == pytest.approx(4 * 0.2**2, rel=1e-5)  # the band's area
