@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
-from ._aberrations import AbstractAberrations, Seidel
+from ._aberrations import AbstractAberrations
 from ._numerics import (
     EXACT,
     all_finite,
@@ -31,7 +31,7 @@ from ._numerics import (
     spread_batch,
     with_batching_rule,
 )
-from ._otf import OTF_METHODS, _otf_fft, _otf_nudft, _otf_overlap, otf_fft_grid
+from ._otf import OTF_METHODS, _otf_fft, _otf_nudft, _otf_overlap, check_scalars, otf_fft_grid
 from ._quadrature import (
     FINE_SUB_PANEL,
     OUTER_NODES,
@@ -325,19 +325,8 @@ def _validate_geometry(aberrations, field, u):
 def _check_one_design(aberrations, field, u):
     """``ValueError`` unless ``field``, ``u`` and Seidel coefficients are scalars (one design;
     batches go through ``sweep_jmse`` or ``jax.vmap``)."""
-    named = [("field", field), ("u", u)]
-    if isinstance(aberrations, Seidel):
-        named += [(f"aberrations.{name}", getattr(aberrations, name))
-                  for name in Seidel.__dataclass_fields__]
-    for name, value in named:
-        if value is None:  # an empty pytree: no check would see it
-            raise TypeError(f"{name} must be a real number, got None")
-        shape = tuple(value.shape) if hasattr(value, "shape") else np.shape(value)
-        if shape != ():
-            raise ValueError(
-                f"{name} must be a scalar (one design), got shape {shape}; for many designs "
-                "use jmse_jax.sweep_jmse or jax.vmap"
-            )
+    check_scalars(aberrations, [("field", field), ("u", u)],
+                  "for many designs use jmse_jax.sweep_jmse or jax.vmap")
 
 
 def _validate(aberrations, field, u, signal, noise):

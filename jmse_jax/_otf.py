@@ -82,17 +82,23 @@ def _check_aberrations(aberrations, field):
         )
     check_finite_tree("aberrations", aberrations)
     check_range("field", field, 0.0, 1.0)
-    named = [("field", field)]
+    check_scalars(aberrations, [("field", field)],
+                  "the frequencies may be arrays; for many designs use jax.vmap")
+
+
+def check_scalars(aberrations, named, hint: str) -> None:
+    """``TypeError`` for a ``None`` and ``ValueError`` for an array among ``named`` (pairs of
+    name and value) and the Seidel coefficients of ``aberrations``: one design per call
+    (``hint`` says where batches go)."""
     if isinstance(aberrations, Seidel):
-        named += [(f"aberrations.{name}", getattr(aberrations, name))
-                  for name in Seidel.__dataclass_fields__]
+        named = [*named, *((f"aberrations.{name}", getattr(aberrations, name))
+                           for name in Seidel.__dataclass_fields__)]
     for name, value in named:
-        if value is None:  # an empty pytree: no check would see it
+        if value is None:  # an empty pytree: no other check would see it
             raise TypeError(f"{name} must be a real number, got None")
-        if np.ndim(value) != 0:
-            raise ValueError(f"{name} must be a scalar (one design; the frequencies may be "
-                             f"arrays, designs go through jax.vmap), got shape "
-                             f"{np.shape(value)}")
+        shape = tuple(value.shape) if hasattr(value, "shape") else np.shape(value)
+        if shape != ():
+            raise ValueError(f"{name} must be a scalar (one design), got shape {shape}; {hint}")
 
 
 # --------------------------------------------------------------------------------------
