@@ -1581,6 +1581,16 @@ def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False):
             UserWarning, stacklevel=stacklevel)
 
 
+def _strength_message(which: str) -> str:
+    """The warning for a design (or designs: ``which``) beyond ``CHECKED_STRENGTH``; the
+    command line gives it too, for designs it runs under ``jit``."""
+    return (f"aberration_strength {which} is beyond what the presets and the default's tiers "
+            f"were checked at ({CHECKED_STRENGTH:g}; {CHECKED_STRENGTH_ONE_RAY:g} for a "
+            f"rotationally symmetric design): the JMSE may be far off. Give grids sized for it "
+            f"(nodes, se_nodes, overlap_nodes; see jmse's docstring and the README) and "
+            f"compare two of them (are the coefficients in waves?)")
+
+
 def _concrete_merit(static, inputs, warn=False):
     """``jmse`` after validation, for concrete inputs: the plan this design takes is chosen
     first, and only the grids it needs are compiled (each once per process) and run.
@@ -1592,12 +1602,7 @@ def _concrete_merit(static, inputs, warn=False):
     index, symmetric, strength = _concrete_choice(static, *inputs[:3])
     index, symmetric, strength = int(index), int(symmetric), float(strength)
     if warn and strength > (CHECKED_STRENGTH_ONE_RAY if symmetric else CHECKED_STRENGTH):
-        warnings.warn(
-            f"aberration_strength {strength:.3g} is beyond what the presets and the default's "
-            f"tiers were checked at: the JMSE may be far off. Give "
-            f"grids sized for it (nodes, se_nodes, overlap_nodes; see jmse's docstring and "
-            f"the README) and compare two of them (are the coefficients in waves?)",
-            UserWarning, stacklevel=3)
+        warnings.warn(_strength_message(f"{strength:.3g}"), UserWarning, stacklevel=3)
     if warn and not symmetric:  # the one-ray plans integrate the peaks in closed form
         _warn_beyond_checked_snr(*inputs[2:], stacklevel=4, peaks=static.value[0]["peaks"])
     plan = plans[index]

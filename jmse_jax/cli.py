@@ -172,15 +172,10 @@ def _write_json(path, data):
 
 
 def _strength_message(strength: float, beyond: int = 1, n: int = 1) -> str:
-    from ._merit import CHECKED_STRENGTH, CHECKED_STRENGTH_ONE_RAY
+    from ._merit import _strength_message as message
 
-    which = f"{strength:.3g}" if n == 1 else f"up to {strength:.3g} ({beyond} of {n} designs)"
-    return (f"aberration_strength {which} is beyond what the presets and the "
-            f"default's tiers were checked at ({CHECKED_STRENGTH:g}; "
-            f"{CHECKED_STRENGTH_ONE_RAY:g} for a rotationally symmetric design): the JMSE "
-            f"may be far off. Give grids sized for it (nodes, se_nodes, overlap_nodes; see "
-            f"jmse's docstring and the README) and compare two of them (are the coefficients "
-            f"in waves?)")
+    return message(f"{strength:.3g}" if n == 1
+                   else f"up to {strength:.3g} ({beyond} of {n} designs)")
 
 
 def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int = 1024) -> list:
