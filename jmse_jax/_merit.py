@@ -699,7 +699,9 @@ def aberration_strength(aberrations: AbstractAberrations, field, u):
 
     Returns
     -------
-    scalar [waves]; not differentiable (its gradient is zero).
+    scalar [waves]; not differentiable (its gradient is zero). Under ``jit`` or ``vmap``
+    (values unchecked) a non-finite input, ``field`` outside [0, 1] or ``u <= 0`` gives
+    ``+inf``, as ``jmse`` does.
 
     Examples
     --------
@@ -709,7 +711,12 @@ def aberration_strength(aberrations: AbstractAberrations, field, u):
     """
     _validate_geometry(aberrations, field, u)
     dtype = common_dtype(aberrations, field, u)
-    return _strength(aberrations, jnp.asarray(field, dtype), jnp.asarray(u, dtype))
+    field, u = jnp.asarray(field, dtype), jnp.asarray(u, dtype)
+    # Traced input is not checked above: out of range or non-finite gives +inf, as jmse.
+    ok = all_finite((aberrations, field, u)) & (field >= 0) & (field <= 1) & (u > 0)
+    stand_in = jax.tree_util.tree_map(
+        lambda leaf: jnp.where(ok, leaf, jnp.zeros_like(leaf)), aberrations)
+    return jnp.where(ok, _strength(stand_in, field, u), jnp.inf)
 
 
 def _tier_index(strength, u, tiers):

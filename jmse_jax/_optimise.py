@@ -524,7 +524,7 @@ def optimise(
     bounds: dict | None = None,
     solver="bfgs",
     scales: dict | None = None,
-    rtol: float = 1e-7,
+    rtol: float | None = None,
     atol: float = 1e-7,
     max_steps: int = 200,
     jmse_options: dict | None = None,
@@ -559,7 +559,10 @@ def optimise(
         jaxopt's ``LBFGSB`` replaces the optimistix solver.
     solver : {"bfgs", "nonlinear_cg", "lbfgs"} or an ``optimistix.AbstractMinimiser``
     scales : dict name -> float, optional, variable scales [lens units per unit step]
-    rtol, atol : float, optimistix termination tolerances (on ``y`` and ``log M``)
+    rtol, atol : float, optimistix termination tolerances (on ``y`` and ``log M``). With
+        ``bounds``, jaxopt's ``LBFGSB`` stops when the norm of the projected gradient of
+        ``log M`` in ``y`` is at most ``atol``; it has no relative tolerance, and giving
+        ``rtol`` there is refused.
     max_steps : int >= 1
 
     Returns
@@ -582,6 +585,10 @@ def optimise(
         raise TypeError(f"lens must be a jmse_jax.lens.Lens, got {type(lens)}")
     check_choice("merit", merit, MERITS)
     check_count("max_steps", max_steps)
+    if rtol is not None and bounds:
+        raise ValueError(f"rtol = {rtol!r} has no effect with bounds (jaxopt's LBFGSB stops on "
+                         f"the projected gradient's norm, atol, alone); leave rtol out")
+    rtol = 1e-7 if rtol is None else rtol
     check_range("rtol", rtol, 0.0, None)
     check_range("atol", atol, 0.0, None)
     if isinstance(variables, str):

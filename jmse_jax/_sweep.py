@@ -497,7 +497,9 @@ def sweep(
         Show a tqdm progress bar, updated after each call. Default: on when stderr is a
         terminal and the sweep takes more than one call.
     metadata : dict, optional
-        JSON-serialisable values stored in ``result.metadata["user"]``.
+        JSON-serialisable values stored in ``result.metadata["user"]``. ``save`` writes
+        them as JSON, so after ``load`` tuples and arrays come back as lists and dictionary
+        keys as strings.
 
     Returns
     -------

@@ -243,6 +243,10 @@ def test_optimise_argument_errors():
         optimise(lens, ("curvatures[0]",), merit="rms", bounds={"image_shift": (-1, 1)})
     with pytest.raises(ValueError, match="low < high"):
         optimise(lens, ("image_shift",), merit="rms", bounds={"image_shift": (1, -1)})
+    # jaxopt's LBFGSB has no relative tolerance: an rtol given with bounds was ignored
+    with pytest.raises(ValueError, match=r"rtol = 1e-05 has no effect with bounds"):
+        optimise(lens, ("image_shift",), merit="rms", bounds={"image_shift": (-1, 1)},
+                 rtol=1e-5)
     with pytest.raises(ValueError, match="merit must be one of"):
         optimise(lens, ("image_shift",), merit="strehl")
     with pytest.raises(ValueError, match="solver must be one of"):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -216,3 +217,60 @@ def test_bad_input_raises(kwargs, match):
 def test_non_finite_coefficient_raises(value):
     with pytest.raises(ValueError, match=r"aberrations\.w131 must be finite, got (nan|inf)"):
         jj.otf(jj.Seidel(w131=value), 0.1, 0.2, 0.5)
+
+
+@pytest.mark.parametrize("method", ["overlap", "nudft"])
+def test_bad_traced_input_gives_nan_not_a_plausible_number(method):
+    """Under jit nothing can be checked: a non-finite frequency gives NaN at that node only
+    (a NaN frequency gave 1 + NaN j), a bad design NaN everywhere (field 1.5 gave a finite
+    OTF), and the gradient at the good nodes is the one without the bad node."""
+    settings = dict(nodes=(24, 24)) if method == "overlap" else dict(B=32)
+
+    @jax.jit
+    def h(w020, nu_x, field):
+        return jj.otf(jj.Seidel(w020=w020, w131=0.4), nu_x, 0.1, field, method, **settings)
+
+    good = jnp.array([0.3, -0.2])
+    expected = h(1.0, good, 0.5)
+    assert np.all(np.isfinite(np.asarray(expected).view(float)))
+    for bad in (jnp.nan, jnp.inf):
+        value = np.asarray(h(1.0, jnp.array([0.3, bad, -0.2]), 0.5))
+        assert np.isnan(value[1].real) and np.isnan(value[1].imag)
+        np.testing.assert_allclose(value[[0, 2]], expected, rtol=1e-12)
+    for w020, field in ((jnp.nan, 0.5), (1.0, jnp.nan), (1.0, 1.5), (1.0, -0.1)):
+        assert np.all(np.isnan(np.asarray(h(w020, good, field)).view(float)))
+
+    def real_part(w020, nu_x):
+        return jnp.nansum(h(w020, nu_x, 0.5).real)
+
+    gradient = jax.grad(real_part)(1.0, jnp.array([0.3, jnp.nan, -0.2]))
+    assert np.isfinite(gradient)
+    assert float(gradient) == pytest.approx(float(jax.grad(real_part)(1.0, good)), rel=1e-12)
+
+
+def test_aberration_strength_of_bad_traced_input_is_inf():
+    """As jmse: +inf (was NaN, or a finite number for a field outside [0, 1] or u < 0)."""
+    strength = jax.jit(lambda w, f, u: jj.aberration_strength(jj.Seidel(w020=w), f, u))
+    assert float(strength(1.0, 0.0, 0.5)) == pytest.approx(2.0 * math.sqrt(2.0) * 0.5, rel=1e-12)
+    for w, f, u in ((jnp.nan, 0.0, 0.5), (1.0, jnp.nan, 0.5), (1.0, 0.0, jnp.inf),
+                    (1.0, 2.0, 0.5), (1.0, 0.0, -1.0), (1.0, 0.0, 0.0)):
+        assert float(strength(w, f, u)) == math.inf, (w, f, u)
+
+
+def test_too_few_overlap_nodes_warn():
+    """Concrete calls warn when the nodes look too few for 1e-6 (here 12 waves of coma at
+    the default (32, 32): 1.8e-5 off near nu = (0.05, 0.2) against (160, 160)); enough
+    nodes, or a mild design, are quiet."""
+    coma = jj.Seidel(w131=12.0)
+    nu = jnp.linspace(0.05, 0.95, 10)
+    with pytest.warns(UserWarning, match=r"nodes=\(32, 32\) may be too few .* about "
+                                         r"nodes=\((\d+), \1\) holds 1e-6"):
+        coarse = jj.otf(coma, nu, 0.2, 1.0)
+    fine = jj.otf(coma, nu, 0.2, 1.0, nodes=(160, 160))
+    assert float(jnp.max(jnp.abs(coarse - fine))) > 1e-5  # the warning was warranted
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        enough = jj.otf(coma, nu, 0.2, 1.0, nodes=(48, 48))
+        jj.otf(jj.Seidel(w131=4.0), nu, 0.2, 1.0)
+        jax.jit(lambda c: jj.otf(jj.Seidel(w131=c), nu, 0.2, 1.0))(12.0)  # traced: no check
+    assert float(jnp.max(jnp.abs(enough - fine))) < 1e-6
