@@ -221,7 +221,7 @@ def test_otf_jit_and_vmap(method):
     nu_x, nu_y = jnp.asarray([0.1, -0.3, 0.45]), jnp.asarray([0.2, 0.05, -0.5])
 
     def fn(ab, field):
-        return jj.otf(ab, nu_x, nu_y, field, method, nodes=(24, 24), B=32)
+        return jj.otf(ab, nu_x, nu_y, field, method, nodes=(28, 28), B=32)
 
     eager = fn(_member(0), 0.95)
     np.testing.assert_allclose(jax.jit(fn)(_member(0), 0.95), eager, atol=1e-13)
