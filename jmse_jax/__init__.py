@@ -14,6 +14,8 @@ from ._aberrations import (
     wavefront as wavefront,
 )
 from ._merit import (
+    CHECKED_SLOPE as CHECKED_SLOPE,
+    CHECKED_SLOPE_ONE_RAY as CHECKED_SLOPE_ONE_RAY,
     CHECKED_SNR as CHECKED_SNR,
     CHECKED_SNR_PEAKS as CHECKED_SNR_PEAKS,
     CHECKED_STRENGTH as CHECKED_STRENGTH,

@@ -55,6 +55,8 @@ __all__ = [
     "TierShortcut",
     "CHECKED_SNR",
     "CHECKED_SNR_PEAKS",
+    "CHECKED_SLOPE",
+    "CHECKED_SLOPE_ONE_RAY",
     "CHECKED_STRENGTH",
     "SEQUENTIAL_VMAP_BACKENDS",
     "U_MAX",
@@ -74,6 +76,18 @@ U_MAX = 1.5
 CHECKED_STRENGTH = 25.0
 #: The same for rotationally symmetric designs, which take the one-ray plans (README).
 CHECKED_STRENGTH_ONE_RAY = 45.0
+#: The largest wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius] at
+#: which the default's tiers were checked: ``aberration_strength`` is the slope times
+#: ``min(sqrt(2) u, 1)``, so at small ``u`` a design of moderate strength can be one of many
+#: waves, and there the overlap rule's orders bind. Designs of one strong term
+#: (``benchmarks/small_u_single_terms.py``) were far off beyond it inside
+#: ``CHECKED_STRENGTH`` (8e-3 for 22 waves of coma at u = 0.2, slope 51; 23 % for 44 waves
+#: at u = 0.1), within 1e-4 up to it; the calibration designs reach 35-42. A concrete design
+#: beyond it gets a ``UserWarning`` from ``jmse``.
+CHECKED_SLOPE = 35.0
+#: The same for rotationally symmetric designs: the one-ray plans held 3.5e-5 at 22 waves of
+#: defocus on the axis at u = 1 (slope 44) and missed 1.3e-3 at slope 58 (u = 0.3).
+CHECKED_SLOPE_ONE_RAY = 45.0
 #: The largest peak signal-to-noise ratio ``max S_x / S_n`` over the band at which the
 #: presets' polar grids were checked to 1e-4 (a noise variance of about 8e-5 under
 #: ``MarkovSignal(1, 5)``, whose ``S_x(0)`` is 157; the bank's lowest noise, 1e-4, is
@@ -1359,7 +1373,9 @@ def jmse(
     Notes
     -----
     A concrete design whose ``aberration_strength`` exceeds what the presets were checked
-    at (``CHECKED_STRENGTH``, 25; 45 for rotationally symmetric designs) gets a
+    at (``CHECKED_STRENGTH``, 25; 45 for rotationally symmetric designs), or whose wavefront
+    slope ``max |grad W|`` does (``CHECKED_SLOPE``, 35 waves per pupil radius; 45: at small
+    ``u`` a design of moderate strength can hold many waves), gets a
     ``UserWarning`` unless grid options are given, and so does a peak ``max S_x / S_n``
     above ``CHECKED_SNR`` (2e6; ``CHECKED_SNR_PEAKS``, 2e8, with ``peaks``) for a design
     that takes a polar grid: where the OTF nearly vanishes on a ring the peaks of ``S_e``
@@ -1598,6 +1614,29 @@ def _strength_message(which: str) -> str:
             f"compare two of them (are the coefficients in waves?)")
 
 
+def _slope_message(which: str) -> str:
+    """The warning for a design (or designs: ``which``) whose wavefront slope is beyond
+    ``CHECKED_SLOPE`` while its strength is inside ``CHECKED_STRENGTH``; the command line
+    gives it too."""
+    return (f"the wavefront slope max |grad W| of {which} [waves per pupil radius] is beyond "
+            f"what the default's tiers were checked at ({CHECKED_SLOPE:g}; "
+            f"{CHECKED_SLOPE_ONE_RAY:g} for a rotationally symmetric design), although "
+            f"aberration_strength is inside: at small u, many waves of aberration were "
+            f"measured far off (8e-3 for 22 waves of coma at u = 0.2; "
+            f"benchmarks/small_u_single_terms.py). Compare with grids of your own, larger "
+            f"overlap_nodes in particular (see jmse's docstring)")
+
+
+def _beyond_checked(strength, u, symmetric):
+    """``(strength beyond, slope beyond, slope)`` for designs (arrays or scalars) of the
+    given ``aberration_strength``, ``u`` and symmetry."""
+    strength, u, symmetric = np.asarray(strength), np.asarray(u), np.asarray(symmetric, bool)
+    slope = strength / np.minimum(math.sqrt(2.0) * u, 1.0)
+    strong = strength > np.where(symmetric, CHECKED_STRENGTH_ONE_RAY, CHECKED_STRENGTH)
+    steep = ~strong & (slope > np.where(symmetric, CHECKED_SLOPE_ONE_RAY, CHECKED_SLOPE))
+    return strong, steep, slope
+
+
 def _concrete_merit(static, inputs, warn=False):
     """``jmse`` after validation, for concrete inputs: the plan this design takes is chosen
     first, and only the grids it needs are compiled (each once per process) and run.
@@ -1608,8 +1647,11 @@ def _concrete_merit(static, inputs, warn=False):
     plans = _base_plans(static)
     index, symmetric, strength = _concrete_choice(static, *inputs[:3])
     index, symmetric, strength = int(index), int(symmetric), float(strength)
-    if warn and strength > (CHECKED_STRENGTH_ONE_RAY if symmetric else CHECKED_STRENGTH):
+    strong, steep, slope = _beyond_checked(strength, float(inputs[2]), symmetric)
+    if warn and strong:
         warnings.warn(_strength_message(f"{strength:.3g}"), UserWarning, stacklevel=3)
+    elif warn and steep:
+        warnings.warn(_slope_message(f"{float(slope):.3g}"), UserWarning, stacklevel=3)
     if warn and not symmetric:  # the one-ray plans integrate the peaks in closed form
         _warn_beyond_checked_snr(*inputs[2:], stacklevel=4, peaks=static.value[0]["peaks"])
     plan = plans[index]

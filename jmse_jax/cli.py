@@ -171,18 +171,18 @@ def _write_json(path, data):
     print(f"wrote {path}")
 
 
-def _strength_message(strength: float, beyond: int = 1, n: int = 1) -> str:
-    from ._merit import _strength_message as message
-
-    return message(f"{strength:.3g}" if n == 1
-                   else f"up to {strength:.3g} ({beyond} of {n} designs)")
+def _beyond_message(message, value: float, beyond: int = 1, n: int = 1) -> str:
+    """``message`` (``_merit``'s strength or slope warning) for the largest ``value``
+    among ``beyond`` of ``n`` designs."""
+    return message(f"{value:.3g}" if n == 1 else f"up to {value:.3g} ({beyond} of {n} designs)")
 
 
 def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int = 1024) -> list:
     """The warnings ``jmse`` gives a concrete design, for designs that run under ``jit`` (where
-    it cannot give them): ``aberration_strength`` beyond ``CHECKED_STRENGTH`` and peak
-    ``S_x / S_n`` beyond ``CHECKED_SNR``. Leaves of shape (n,), one design per row; the
-    strength and symmetry of each come from the library's own choice of plan
+    it cannot give them): ``aberration_strength`` beyond ``CHECKED_STRENGTH``, the wavefront
+    slope beyond ``CHECKED_SLOPE``, and peak ``S_x / S_n`` beyond ``CHECKED_SNR``. Leaves of
+    shape (n,), one design per row; the strength and symmetry of each come from the
+    library's own choice of plan
     (``_concrete_choice``), the noise check is the library's (``_warn_beyond_checked_snr``).
     Each warning goes to stderr as one line; returns their texts."""
     import functools
@@ -192,10 +192,11 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
     import numpy as np
 
     from ._merit import (
-        CHECKED_STRENGTH,
-        CHECKED_STRENGTH_ONE_RAY,
+        _beyond_checked,
         _concrete_choice,
         _prepare,
+        _slope_message,
+        _strength_message,
         _warn_beyond_checked_snr,
         jmse_options,
     )
@@ -214,12 +215,14 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
         symmetric.append(np.asarray(sym)[: n - start])
         strength.append(np.asarray(st)[: n - start])
     symmetric, strength = np.concatenate(symmetric), np.concatenate(strength)
-    beyond = strength > np.where(symmetric, CHECKED_STRENGTH_ONE_RAY, CHECKED_STRENGTH)
+    strong, steep, slope = _beyond_checked(strength, np.asarray(u), symmetric)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        if beyond.any():
-            warnings.warn(_strength_message(float(strength[beyond].max()), int(beyond.sum()), n),
-                          UserWarning, stacklevel=2)
+        for message, beyond, values in ((_strength_message, strong, strength),
+                                        (_slope_message, steep, slope)):
+            if beyond.any():
+                warnings.warn(_beyond_message(message, float(values[beyond].max()),
+                                              int(beyond.sum()), n), UserWarning, stacklevel=2)
         if not symmetric.all():  # the one-ray plans integrate the peaks in closed form
             u_max = jnp.asarray(np.max(np.asarray(u)[~symmetric]), np.asarray(u).dtype)
             _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=2,

@@ -507,6 +507,31 @@ def test_design_beyond_the_checked_strength_warns():
         jj.jmse(jj.Seidel(w020=2.0, w131=0.5), 0.5, 0.5, signal, noise, preset="fast")
 
 
+def test_many_waves_at_small_u_warn_inside_the_checked_strength():
+    """aberration_strength is the slope max |grad W| times min(sqrt(2) u, 1): 22 waves of
+    coma at u = 0.2 is strength 14.5, inside CHECKED_STRENGTH, but slope 51, and the
+    default's tier is 8.5e-3 off there (benchmarks/small_u_single_terms.py; here against a
+    grid with about twice its overlap order, 2.9e-7 from the converged reference).
+    A concrete call warns; the Fig. 1 point (slope 11) and a design on the axis up to slope
+    45 (the one-ray plans' bound) do not."""
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    coma = jj.Seidel(w131=22.0)
+    assert float(jj.aberration_strength(coma, 1.0, 0.2)) < jj.CHECKED_STRENGTH
+    with pytest.warns(UserWarning, match=r"the wavefront slope max \|grad W\| of 51\.3 "
+                                         r"\[waves per pupil radius\] is beyond"):
+        value = float(jj.jmse(coma, 1.0, 0.2, signal, noise))
+    finer = float(jj.jmse(coma, 1.0, 0.2, signal, noise, nodes=(64, 40), se_nodes=(4800, 128),
+                          overlap_nodes=(72, 72), overlap_floor=72))
+    assert abs(value / finer - 1) > 1e-3  # what the warning is for
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jj.jmse(jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198),
+                0.95, 0.2, signal, noise, preset="fast")
+        jj.jmse(jj.Seidel(w020=22.0), 0.0, 1.0, signal, noise, preset="fast")  # slope 44
+    with pytest.warns(UserWarning, match=r"of 58 \[waves per pupil radius\]"):
+        jj.jmse(jj.Seidel(w020=29.0), 0.0, 0.3, signal, noise, preset="fast")  # 1.3e-3 off
+
+
 def test_noise_beyond_the_checked_snr_warns():
     """Above CHECKED_SNR the S_e peaks where the OTF nearly vanishes on a ring are narrower
     than the polar grids (benchmarks/low_noise.py: 1.1e-4 off at 5.2e6 for 6 waves of
