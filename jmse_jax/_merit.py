@@ -56,7 +56,6 @@ __all__ = [
     "CHECKED_SNR",
     "CHECKED_SNR_PEAKS",
     "CHECKED_SLOPE",
-    "CHECKED_SLOPE_ONE_RAY",
     "CHECKED_STRENGTH",
     "SEQUENTIAL_VMAP_BACKENDS",
     "U_MAX",
@@ -77,17 +76,15 @@ CHECKED_STRENGTH = 25.0
 #: The same for rotationally symmetric designs, which take the one-ray plans (README).
 CHECKED_STRENGTH_ONE_RAY = 45.0
 #: The largest wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius] at
-#: which the default's tiers were checked: ``aberration_strength`` is the slope times
-#: ``min(sqrt(2) u, 1)``, so at small ``u`` a design of moderate strength can be one of many
-#: waves, and there the overlap rule's orders bind. Designs of one strong term
-#: (``benchmarks/small_u_single_terms.py``) were far off beyond it inside
-#: ``CHECKED_STRENGTH`` (8e-3 for 22 waves of coma at u = 0.2, slope 51; 23 % for 44 waves
-#: at u = 0.1), within 1e-4 up to it; the calibration designs reach 35-42. A concrete design
-#: beyond it gets a ``UserWarning`` from ``jmse``.
-CHECKED_SLOPE = 35.0
-#: The same for rotationally symmetric designs: the one-ray plans held 3.5e-5 at 22 waves of
-#: defocus on the axis at u = 1 (slope 44) and missed 1.3e-3 at slope 58 (u = 0.3).
-CHECKED_SLOPE_ONE_RAY = 45.0
+#: which the default's tiers and one-ray plans were checked: ``aberration_strength`` is the
+#: slope times ``min(sqrt(2) u, 1)``, so at small ``u`` a design of moderate strength can be
+#: one of many waves, and there the overlap rule's orders bind. Designs steeper than
+#: ``STEEP_SLOPE`` take the last tier (and the strong one-ray plan, which takes that tier's
+#: overlap rule): on designs of slope up to 67 at u 0.1-0.3 the worst error was 7.2e-5
+#: (``benchmarks/small_u_single_terms.py`` and STEEP_SLOPE's note); beyond, single terms
+#: were far off (74 waves of coma at u = 0.1, slope 173, 1.6e-1; 43 waves of defocus at
+#: u = 0.2, slope 87, 7e-3). A concrete design beyond it gets a ``UserWarning`` from ``jmse``.
+CHECKED_SLOPE = 65.0
 #: The largest peak signal-to-noise ratio ``max S_x / S_n`` over the band at which the
 #: presets' polar grids were checked to 1e-4 (a noise variance of about 8e-5 under
 #: ``MarkovSignal(1, 5)``, whose ``S_x(0)`` is 157; the bank's lowest noise, 1e-4, is
@@ -216,9 +213,24 @@ DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
      _SHORTCUT),
     (15.0, _REACHES_CUTOFF_U, dict(nodes=(64, 40), se_nodes=(4800, 128), overlap_nodes=(40, 32)),
      None),
-    (math.inf, math.inf, dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(56, 40)),
+    (math.inf, math.inf, dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(64, 64),
+                              overlap_floor=64),
      None),
 )
+#: Designs whose wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius]
+#: exceeds this take the last tier whatever their strength. The strength scales the slope
+#: by ``min(sqrt(2) u, 1)``, so at small ``u`` a design of moderate strength holds many
+#: waves, and the phase difference across the overlap lens, which grows with the slope,
+#: outgrows the weaker tiers' overlap rules: on 48 designs of one term at u 0.1-0.3
+#: (``benchmarks/small_u_single_terms.py``, session 55) 22 were more than 1e-4 off (8.5e-3 for
+#: 22 waves of coma at u = 0.2, strength 14.5), each with a slope above 35; the calibration
+#: designs reach 35-42. The last tier's overlap rule was raised for them from (56, 40) with
+#: the presets' floor 24 to (64, 64) on every panel: on 37 designs of slope 45-67 at u
+#: 0.1-0.3 (single terms and mixtures) it is within 6.9e-5 of converged references, where
+#: (56, 56) with floor 56 left 2.3e-3 and (64, 64) with floor 40 1.6e-4 on a mixture at
+#: u = 0.3 (slope 55), and the 288 stored calibration designs of the tier keep their worst
+#: error (2.5e-8), at about 1.8x the tier's value time.
+STEEP_SLOPE = 35.0
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
@@ -734,13 +746,15 @@ def aberration_strength(aberrations: AbstractAberrations, field, u):
 
 
 def _tier_index(strength, u, tiers):
-    """Index of the first tier whose bounds hold (traceable; the last tier has none)."""
+    """Index of the first tier whose bounds hold (traceable; the last tier has none); a
+    design steeper than ``STEEP_SLOPE`` takes the last tier."""
     index = jnp.zeros((), jnp.int32)
     past = jnp.asarray(True)
     for bound, u_bound, *_ in tiers[:-1]:
         past = past & ((strength > bound) | (u > u_bound))
         index = index + past.astype(jnp.int32)
-    return index
+    steep = strength > STEEP_SLOPE * jnp.minimum(math.sqrt(2.0) * u, 1.0)
+    return jnp.where(steep, len(tiers) - 1, index).astype(jnp.int32)
 
 
 def _plain_one_ray_merit(options, dtype, operands):
@@ -1374,7 +1388,7 @@ def jmse(
     -----
     A concrete design whose ``aberration_strength`` exceeds what the presets were checked
     at (``CHECKED_STRENGTH``, 25; 45 for rotationally symmetric designs), or whose wavefront
-    slope ``max |grad W|`` does (``CHECKED_SLOPE``, 35 waves per pupil radius; 45: at small
+    slope ``max |grad W|`` does (``CHECKED_SLOPE``, 65 waves per pupil radius: at small
     ``u`` a design of moderate strength can hold many waves), gets a
     ``UserWarning`` unless grid options are given, and so does a peak ``max S_x / S_n``
     above ``CHECKED_SNR`` (2e6; ``CHECKED_SNR_PEAKS``, 2e8, with ``peaks``) for a design
@@ -1619,12 +1633,11 @@ def _slope_message(which: str) -> str:
     ``CHECKED_SLOPE`` while its strength is inside ``CHECKED_STRENGTH``; the command line
     gives it too."""
     return (f"the wavefront slope max |grad W| of {which} [waves per pupil radius] is beyond "
-            f"what the default's tiers were checked at ({CHECKED_SLOPE:g}; "
-            f"{CHECKED_SLOPE_ONE_RAY:g} for a rotationally symmetric design), although "
+            f"what the default's tiers were checked at ({CHECKED_SLOPE:g}), although "
             f"aberration_strength is inside: at small u, many waves of aberration were "
-            f"measured far off (8e-3 for 22 waves of coma at u = 0.2; "
+            f"measured far off (16 % for 74 waves of coma at u = 0.1; "
             f"benchmarks/small_u_single_terms.py). Compare with grids of your own, larger "
-            f"overlap_nodes in particular (see jmse's docstring)")
+            f"overlap_nodes and overlap_floor in particular (see jmse's docstring)")
 
 
 def _beyond_checked(strength, u, symmetric):
@@ -1633,7 +1646,7 @@ def _beyond_checked(strength, u, symmetric):
     strength, u, symmetric = np.asarray(strength), np.asarray(u), np.asarray(symmetric, bool)
     slope = strength / np.minimum(math.sqrt(2.0) * u, 1.0)
     strong = strength > np.where(symmetric, CHECKED_STRENGTH_ONE_RAY, CHECKED_STRENGTH)
-    steep = ~strong & (slope > np.where(symmetric, CHECKED_SLOPE_ONE_RAY, CHECKED_SLOPE))
+    steep = ~strong & (slope > CHECKED_SLOPE)
     return strong, steep, slope
 
 

@@ -507,29 +507,34 @@ def test_design_beyond_the_checked_strength_warns():
         jj.jmse(jj.Seidel(w020=2.0, w131=0.5), 0.5, 0.5, signal, noise, preset="fast")
 
 
-def test_many_waves_at_small_u_warn_inside_the_checked_strength():
+def test_many_waves_at_small_u_take_the_last_tier_and_warn_beyond_it():
     """aberration_strength is the slope max |grad W| times min(sqrt(2) u, 1): 22 waves of
-    coma at u = 0.2 is strength 14.5, inside CHECKED_STRENGTH, but slope 51, and the
-    default's tier is 8.5e-3 off there (benchmarks/small_u_single_terms.py; here against a
-    grid with about twice its overlap order, 2.9e-7 from the converged reference).
-    A concrete call warns; the Fig. 1 point (slope 11) and a design on the axis up to slope
-    45 (the one-ray plans' bound) do not."""
+    coma at u = 0.2 is strength 14.5 (tier 2's range) but slope 51, where tier 2's overlap
+    rule was 8.5e-3 off (benchmarks/small_u_single_terms.py). Past STEEP_SLOPE it takes the
+    last tier: within 1e-4 of a grid with every overlap order larger (2.9e-7 from the
+    converged reference), no warning. Past CHECKED_SLOPE (36 waves of coma, slope 84, still
+    inside CHECKED_STRENGTH) a concrete call warns, as for 43 waves of defocus on the axis
+    at u = 0.2 (slope 87, 7e-3 off); the Fig. 1 point (slope 11) and 22 waves of defocus on
+    the axis at u = 1 (slope 44) do not."""
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
     coma = jj.Seidel(w131=22.0)
-    assert float(jj.aberration_strength(coma, 1.0, 0.2)) < jj.CHECKED_STRENGTH
-    with pytest.warns(UserWarning, match=r"the wavefront slope max \|grad W\| of 51\.3 "
-                                         r"\[waves per pupil radius\] is beyond"):
-        value = float(jj.jmse(coma, 1.0, 0.2, signal, noise))
-    finer = float(jj.jmse(coma, 1.0, 0.2, signal, noise, nodes=(64, 40), se_nodes=(4800, 128),
-                          overlap_nodes=(72, 72), overlap_floor=72))
-    assert abs(value / finer - 1) > 1e-3  # what the warning is for
+    assert float(jj.aberration_strength(coma, 1.0, 0.2)) < 15.0
     with warnings.catch_warnings():
         warnings.simplefilter("error")
+        value = float(jj.jmse(coma, 1.0, 0.2, signal, noise))
         jj.jmse(jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198),
                 0.95, 0.2, signal, noise, preset="fast")
         jj.jmse(jj.Seidel(w020=22.0), 0.0, 1.0, signal, noise, preset="fast")  # slope 44
-    with pytest.warns(UserWarning, match=r"of 58 \[waves per pupil radius\]"):
-        jj.jmse(jj.Seidel(w020=29.0), 0.0, 0.3, signal, noise, preset="fast")  # 1.3e-3 off
+    finer = float(jj.jmse(coma, 1.0, 0.2, signal, noise, nodes=(64, 40), se_nodes=(4800, 128),
+                          overlap_nodes=(72, 72), overlap_floor=72))
+    assert value == pytest.approx(finer, rel=1e-4)
+    steeper = jj.Seidel(w131=36.0)
+    assert float(jj.aberration_strength(steeper, 1.0, 0.2)) < jj.CHECKED_STRENGTH
+    with pytest.warns(UserWarning, match=r"the wavefront slope max \|grad W\| of 84 "
+                                         r"\[waves per pupil radius\] is beyond"):
+        jj.jmse(steeper, 1.0, 0.2, signal, noise, preset="fast")
+    with pytest.warns(UserWarning, match=r"of 86\.6 \[waves per pupil radius\]"):
+        jj.jmse(jj.Seidel(w020=43.3), 0.0, 0.2, signal, noise, preset="fast")
 
 
 def test_noise_beyond_the_checked_snr_warns():

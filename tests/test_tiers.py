@@ -21,9 +21,12 @@ SIGNAL, NOISE = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
 DESIGNS = [
     (jj.Seidel(w020=0.3, w222=0.2), 0.5, 0.2, 0),
     (jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198), 0.95, 0.2, 1),
-    (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 0.8, 0.2, 2),
+    (jj.Seidel(w020=3.0, w040=3.0, w131=3.0, w222=3.0, w220=3.0), 0.8, 0.2, 2),
     (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 1.0, 0.2, 3),
 ]
+# Strength 14.7 (tier 2's range) but a wavefront slope of 52 waves per pupil radius, past
+# STEEP_SLOPE: the last tier.
+ALL_5 = (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 0.8, 0.2, 3)
 # A second middle-tier design (strength 2.0) that keeps the shortcut's first grid (the
 # check agrees with it to 1.8e-6, its error estimate is 1.7e-6).
 FIRST_KEPT = (jj.Seidel(w020=1.52, w040=0.23, w131=-1.02, w222=1.73, w220=-1.18), 0.9, 0.2, 1)
@@ -63,7 +66,12 @@ def test_tier_index_honours_both_bounds():
     assert int(_tier_index(0.5, 0.2, tiers)) == 0
     assert int(_tier_index(0.5, 0.8, tiers)) == 1  # a band reaching the cutoff skips tier 0
     assert int(_tier_index(3.0, 0.2, tiers)) == 1
-    assert int(_tier_index(10.0, 0.2, tiers)) == 2
+    assert int(_tier_index(9.0, 0.2, tiers)) == 2
+    # A design steeper than STEEP_SLOPE (max |grad W| = strength / min(sqrt(2) u, 1), here
+    # 35.4 and 42.4 waves per pupil radius) takes the last tier whatever its strength.
+    assert int(_tier_index(10.0, 0.2, tiers)) == 3
+    assert int(_tier_index(3.0, 0.05, tiers)) == 3
+    assert int(_tier_index(9.8, 0.2, tiers)) == 2  # slope 34.6
     # Rays reaching the cutoff (u > 1/sqrt(2)) need the fourth tier's radial nodes from
     # strength 5 on; weaker designs keep the second tier's grid.
     assert int(_tier_index(10.0, 0.72, tiers)) == 3
@@ -429,7 +437,7 @@ def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch, vectorised_vmap)
          None),
     )
     monkeypatch.setitem(jj.PRESETS["default"], "tiers", tiers)
-    designs = [DESIGNS[0], *middle, DESIGNS[2]]  # strengths 0.2, 3.1, 3.4, 14.7: tier 2 unused
+    designs = [DESIGNS[0], *middle, ALL_5]  # strengths 0.2, 3.1, 3.4, 14.7: tier 2 unused
     assert [int(_tier_index(float(jj.aberration_strength(ab, f, u)), u, tiers))
             for ab, f, u, _ in designs] == [0, 1, 1, 3]
 
