@@ -21,6 +21,7 @@ from ._merit import (
     DEFAULT_TIERS as DEFAULT_TIERS,
     OVERLAP_FLOOR as OVERLAP_FLOOR,
     PRESETS as PRESETS,
+    STEEP_SLOPE as STEEP_SLOPE,
     TierShortcut as TierShortcut,
     aberration_strength as aberration_strength,
     baseline_jmse as baseline_jmse,

@@ -58,6 +58,7 @@ __all__ = [
     "CHECKED_SLOPE",
     "CHECKED_STRENGTH",
     "SEQUENTIAL_VMAP_BACKENDS",
+    "STEEP_SLOPE",
     "U_MAX",
     "aberration_strength",
     "baseline_jmse",
@@ -206,6 +207,8 @@ _SHORTCUT = TierShortcut(trial=None, check=_CHECK_GRID, rtol=1e-5, u_max=_REACHE
 #: 3.5e-5 on the axis up to strength 44, and 9.8e-7 and 2.8e-8 (were 1.3e-5 and 8.4e-5) on
 #: the stored calibration designs of the two tiers, at 1.8x and 2.6x their grids' time
 #: alone and 2.3-5.3x in the default (benchmarks/README.md, optimisation log, session 54).
+#: Later the same day tier 3's overlap rule became (64, 64) on every panel (floor 64) for
+#: the steep designs it now also serves (``STEEP_SLOPE``).
 DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
     (1.0, 0.5, _TIER0_GRID, _SHORTCUT),
     (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 24),

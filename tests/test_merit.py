@@ -528,6 +528,8 @@ def test_many_waves_at_small_u_take_the_last_tier_and_warn_beyond_it():
     finer = float(jj.jmse(coma, 1.0, 0.2, signal, noise, nodes=(64, 40), se_nodes=(4800, 128),
                           overlap_nodes=(72, 72), overlap_floor=72))
     assert value == pytest.approx(finer, rel=1e-4)
+    # Under jit the switch takes the same (last) tier
+    assert float(jmse_fn()(coma, 1.0, 0.2, signal, noise)) == pytest.approx(value, rel=1e-13)
     steeper = jj.Seidel(w131=36.0)
     assert float(jj.aberration_strength(steeper, 1.0, 0.2)) < jj.CHECKED_STRENGTH
     with pytest.warns(UserWarning, match=r"the wavefront slope max \|grad W\| of 84 "
