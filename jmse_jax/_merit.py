@@ -228,7 +228,7 @@ DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
 #: (``benchmarks/small_u_single_terms.py``, session 55) 22 were more than 1e-4 off (8.5e-3 for
 #: 22 waves of coma at u = 0.2, strength 14.5), each with a slope above 35; the calibration
 #: designs reach 35-42. The last tier's overlap rule was raised for them from (56, 40) with
-#: the presets' floor 24 to (64, 64) on every panel: on 37 designs of slope 45-67 at u
+#: the presets' floor 24 to (64, 64) on every panel: on 55 designs of slope 45-67 at u
 #: 0.1-0.3 (single terms and mixtures) it is within 6.9e-5 of converged references, where
 #: (56, 56) with floor 56 left 2.3e-3 and (64, 64) with floor 40 1.6e-4 on a mixture at
 #: u = 0.3 (slope 55), and the 288 stored calibration designs of the tier keep their worst
