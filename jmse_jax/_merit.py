@@ -709,7 +709,13 @@ def _strength(aberrations, field, u):
     # W is pointwise in (x, y), so the gradient of the sum is the pointwise gradient.
     gx, gy = jax.grad(lambda x, y: jnp.sum(aberrations(x, y, field)), argnums=(0, 1))(x, y)
     slope = jnp.max(jnp.sqrt(gx * gx + gy * gy))
-    return slope * jnp.minimum(math.sqrt(2.0) * u, 1.0)
+    return slope * _band_reach(u)
+
+
+def _band_reach(u):
+    """``min(sqrt(2) u, 1)``: the largest frequency the band reaches [cutoff units], the
+    factor between a design's slope ``max |grad W|`` and its ``aberration_strength``."""
+    return jnp.minimum(math.sqrt(2.0) * u, 1.0)
 
 
 def aberration_strength(aberrations: AbstractAberrations, field, u):
@@ -741,11 +747,10 @@ def aberration_strength(aberrations: AbstractAberrations, field, u):
     _validate_geometry(aberrations, field, u)
     dtype = common_dtype(aberrations, field, u)
     field, u = jnp.asarray(field, dtype), jnp.asarray(u, dtype)
-    # Traced input is not checked above: out of range or non-finite gives +inf, as jmse.
+    # Traced input is not checked above: out of range or non-finite gives +inf, as jmse
+    # (no stand-in needed: _strength passes no gradient).
     ok = all_finite((aberrations, field, u)) & (field >= 0) & (field <= 1) & (u > 0)
-    stand_in = jax.tree_util.tree_map(
-        lambda leaf: jnp.where(ok, leaf, jnp.zeros_like(leaf)), aberrations)
-    return jnp.where(ok, _strength(stand_in, field, u), jnp.inf)
+    return jnp.where(ok, _strength(aberrations, field, u), jnp.inf)
 
 
 def _tier_index(strength, u, tiers):
@@ -756,7 +761,7 @@ def _tier_index(strength, u, tiers):
     for bound, u_bound, *_ in tiers[:-1]:
         past = past & ((strength > bound) | (u > u_bound))
         index = index + past.astype(jnp.int32)
-    steep = strength > STEEP_SLOPE * jnp.minimum(math.sqrt(2.0) * u, 1.0)
+    steep = strength > STEEP_SLOPE * _band_reach(u)
     return jnp.where(steep, len(tiers) - 1, index).astype(jnp.int32)
 
 
@@ -1647,7 +1652,7 @@ def _beyond_checked(strength, u, symmetric):
     """``(strength beyond, slope beyond, slope)`` for designs (arrays or scalars) of the
     given ``aberration_strength``, ``u`` and symmetry."""
     strength, u, symmetric = np.asarray(strength), np.asarray(u), np.asarray(symmetric, bool)
-    slope = strength / np.minimum(math.sqrt(2.0) * u, 1.0)
+    slope = strength / np.asarray(_band_reach(u), strength.dtype)
     strong = strength > np.where(symmetric, CHECKED_STRENGTH_ONE_RAY, CHECKED_STRENGTH)
     steep = ~strong & (slope > CHECKED_SLOPE)
     return strong, steep, slope
