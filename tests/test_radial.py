@@ -35,10 +35,17 @@ def _planar(ab, field, u, signal=SIGNAL, noise=NOISE, **grid):
 def _one_ray(ab, field, u, signal=SIGNAL, noise=NOISE, **grid):
     """``_merit_value`` of the one-ray plan of ``grid`` (the tier-1 grid by default)."""
     grid = grid or jj.DEFAULT_TIERS[1][2]
-    options = {**jj.jmse_options("default", **grid), "_radial": True}
-    dtype = jnp.float64
-    return float(_merit._merit_value(options, dtype, ab.without_tilt(), jnp.float64(field),
-                                     jnp.float64(u), signal, noise))
+    program = _one_ray_program(tuple(sorted(grid.items())), _radial._SUBTRACT)
+    return float(program(ab.without_tilt(), jnp.float64(field), jnp.float64(u), signal, noise))
+
+
+@functools.cache
+def _one_ray_program(grid, subtract):
+    """The one-ray plan of the grid (a sorted tuple of options), jitted once per grid and
+    setting of the peak correction (``_radial._SUBTRACT``, read when traced). Run eagerly, op
+    by op, its first call took 16 s."""
+    options = {**jj.jmse_options("default", **dict(grid)), "_radial": True}
+    return jax.jit(functools.partial(_merit._merit_value, options, jnp.float64))
 
 
 def test_symmetry_predicate():

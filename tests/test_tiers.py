@@ -112,7 +112,7 @@ def _fixed32(ab, field, u, grid):
     (*DEFOCUS_M6, "grid"), (*DESIGNS[2], "grid"), (*DESIGNS[3], "grid"),
 ])
 def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
-    """Eager, jit, value_and_grad and forward mode all run the tier the strength selects,
+    """Eager, jit and value_and_grad all run the tier the strength selects,
     and within a tier with a shortcut the grid that the shortcut's rule picks."""
     strength = float(jj.aberration_strength(ab, field, u))
     assert int(_tier_index(strength, u, jj.DEFAULT_TIERS)) == tier
@@ -148,7 +148,17 @@ def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
     for name in ("w020", "w040", "w131", "w222", "w220"):
         np.testing.assert_allclose(getattr(gradient, name), getattr(expected_grad, name),
                                    rtol=1e-10, atol=1e-16)
-    # Forward mode: d/dt jmse(w020 + t) equals the reverse-mode gradient.
+
+
+# Slow: forward mode through the default's whole tier switch is a program of its own (about
+# 40 s to compile on the CI machine). Reverse mode, checked above on the same designs, runs
+# the same derivative rule (JAX linearises the rule and transposes its linear part).
+@pytest.mark.slow
+@pytest.mark.parametrize("ab, field, u, tier", [
+    DESIGNS[0], DESIGNS[1], FIRST_KEPT, DEFOCUS_M6, DESIGNS[2], DESIGNS[3]])
+def test_forward_mode_of_the_default_equals_reverse_mode(ab, field, u, tier):
+    """d/dt jmse(w020 + t) equals the reverse-mode gradient, in every tier and path."""
+    _, gradient = _default_value_and_grad(ab, field, u, SIGNAL, NOISE)
     _, tangent = _default_jvp_w020(ab, field, u)
     np.testing.assert_allclose(tangent, gradient.w020, rtol=1e-10)
 
@@ -321,13 +331,26 @@ def test_default_gradient_matches_finite_differences_in_the_top_tier():
     assert float(grad) == pytest.approx((f[0] - f[1]) / (2 * h), rel=1e-6)
 
 
-def test_vmap_over_designs_in_different_tiers(vectorised_vmap):
-    abs_ = [d[0] for d in DESIGNS]
+def test_vmap_over_designs_in_different_tiers(monkeypatch, vectorised_vmap):
+    """The tiers' vectorised dispatch (a GPU's ``vmap``), value only, on ``SMALL_TIERS``
+    (the default's own tiers, with ``value_and_grad``, compile for minutes: the slow
+    test_vmap_gives_each_design_what_it_gets_alone): a batch spanning both tiers, the second
+    one's shortcut included, gives each design what it gets alone."""
+    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
+    designs = [(jj.Seidel(**_coefficients(d[0])), d[1]) for d in DESIGNS]
+    tiers = [int(_tier_index(jj.aberration_strength(ab, f, 0.2), 0.2, SMALL_TIERS))
+             for ab, f in designs]
+    assert set(tiers) == {0, 1}
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack([jnp.asarray(v, jnp.float64) for v in x]),
-                                   *[jj.Seidel(**_coefficients(a)) for a in abs_])
-    field = jnp.asarray([d[1] for d in DESIGNS])
-    values = jax.jit(jax.vmap(lambda a, f: jj.jmse(a, f, 0.2, SIGNAL, NOISE)))(batch, field)
-    singles = [float(jmse_fn()(a, f, 0.2, SIGNAL, NOISE)) for a, f, _, _ in DESIGNS]
+                                   *[ab for ab, _ in designs])
+    field = jnp.asarray([f for _, f in designs])
+
+    def merit(a, f):
+        return jj.jmse(a, f, 0.2, SIGNAL, NOISE)
+
+    values = jax.jit(jax.vmap(merit))(batch, field)
+    single = jax.jit(merit)
+    singles = [float(single(ab, jnp.float64(f))) for ab, f in designs]
     np.testing.assert_allclose(values, singles, rtol=1e-12)
 
 
@@ -340,13 +363,21 @@ def test_grid_override_fixes_the_grid():
         jj.jmse_options("default", tiers=None)
 
 
-def test_sweep_runs_designs_one_by_one_on_cpu_and_equals_the_loop():
+def test_sweep_runs_designs_one_by_one_on_cpu_and_equals_the_loop(monkeypatch):
+    """A sweep of the default over designs in different tiers (``SMALL_TIERS``, which
+    compile in a fraction of the default's time) runs them one at a time on CPU and equals
+    the loop of single calls."""
+    _tiers_without_one_ray(monkeypatch, SMALL_TIERS)
     ab = jj.Seidel(**{name: np.array([float(getattr(d[0], name)) for d in DESIGNS])
                       for name in ("w020", "w040", "w131", "w222", "w220")})
     field = np.array([d[1] for d in DESIGNS])
     result = jj.sweep_jmse(ab, field, 0.2, SIGNAL, NOISE, progress=False)
     assert result.metadata["batch_size"] == 1
-    loop = [float(jmse_fn()(a, f, 0.2, SIGNAL, NOISE)) for a, f, _, _ in DESIGNS]
+    single = jax.jit(lambda a, f: jj.jmse(a, f, 0.2, SIGNAL, NOISE))
+    loop = [float(single(a, f)) for a, f, _, _ in DESIGNS]
+    tiers = {int(_tier_index(jj.aberration_strength(a, f, 0.2), 0.2, SMALL_TIERS))
+             for a, f, _, _ in DESIGNS}
+    assert tiers == {0, 1}
     np.testing.assert_allclose(result.value, loop, rtol=1e-12)
 
 
