@@ -174,7 +174,8 @@ _SHORTCUT = TierShortcut(trial=None, check=_CHECK_GRID, rtol=1e-5, u_max=_REACHE
                          first=_FIRST_GRID, first_tol=_FIRST_TOL)
 
 #: Grids of the ``"default"`` preset by difficulty: ``(largest aberration_strength, largest
-#: u, grid options, shortcut)``; the first tier whose two bounds hold is used. The coarse
+#: u, grid options, shortcut)``; the first tier whose two bounds hold is used, and a design
+#: steeper than ``STEEP_SLOPE`` takes the last (the steep tier). The coarse
 #: first tier is kept away from bands that reach the cutoff, where ``H`` has its
 #: ``(1 - r)^{3/2}`` edge. Calibrated on 426 random Seidel designs (coefficients to +-8
 #: waves, field 0-1, u 0.1-1, noise 1e-4 to 1e-2, strength up to 25) against a converged
@@ -207,8 +208,11 @@ _SHORTCUT = TierShortcut(trial=None, check=_CHECK_GRID, rtol=1e-5, u_max=_REACHE
 #: 3.5e-5 on the axis up to strength 44, and 9.8e-7 and 2.8e-8 (were 1.3e-5 and 8.4e-5) on
 #: the stored calibration designs of the two tiers, at 1.8x and 2.6x their grids' time
 #: alone and 2.3-5.3x in the default (benchmarks/README.md, optimisation log, session 54).
-#: Later the same day tier 3's overlap rule became (64, 64) on every panel (floor 64) for
-#: the steep designs it now also serves (``STEEP_SLOPE``).
+#: Later the same day the steep designs (``STEEP_SLOPE``) were found short of tier 3's
+#: overlap rule; they take a fifth tier of their own, tier 3's grid with the overlap rule
+#: (64, 64) on every panel (floor 64), which costs about 1.8x tier 3's value time (session
+#: 56: a fifth grid adds about 7 % to the default's compile, where giving tier 3 itself that
+#: rule cost every strong design the 1.8x).
 DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
     (1.0, 0.5, _TIER0_GRID, _SHORTCUT),
     (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 24),
@@ -216,23 +220,26 @@ DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
      _SHORTCUT),
     (15.0, _REACHES_CUTOFF_U, dict(nodes=(64, 40), se_nodes=(4800, 128), overlap_nodes=(40, 32)),
      None),
+    (math.inf, math.inf, dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(56, 40)),
+     None),
+    # The steep tier: reached only through STEEP_SLOPE (the tier before it has no bound).
     (math.inf, math.inf, dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(64, 64),
                               overlap_floor=64),
      None),
 )
 #: Designs whose wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius]
-#: exceeds this take the last tier whatever their strength. The strength scales the slope
+#: exceeds this take the last tier (the steep one) whatever their strength. The strength scales the slope
 #: by ``min(sqrt(2) u, 1)``, so at small ``u`` a design of moderate strength holds many
 #: waves, and the phase difference across the overlap lens, which grows with the slope,
 #: outgrows the weaker tiers' overlap rules: on 48 designs of one term at u 0.1-0.3
 #: (``benchmarks/small_u_single_terms.py``, session 55) 22 were more than 1e-4 off (8.5e-3 for
 #: 22 waves of coma at u = 0.2, strength 14.5), each with a slope above 35; the calibration
-#: designs reach 35-42. The last tier's overlap rule was raised for them from (56, 40) with
-#: the presets' floor 24 to (64, 64) on every panel: on 55 designs of slope 45-67 at u
+#: designs reach 35-42. They take a last tier whose overlap rule is raised from tier 3's
+#: (56, 40) with the presets' floor 24 to (64, 64) on every panel: on 55 designs of slope 45-67 at u
 #: 0.1-0.3 (single terms and mixtures) it is within 6.9e-5 of converged references, where
 #: (56, 56) with floor 56 left 2.3e-3 and (64, 64) with floor 40 1.6e-4 on a mixture at
-#: u = 0.3 (slope 55), and the 288 stored calibration designs of the tier keep their worst
-#: error (2.5e-8), at about 1.8x the tier's value time.
+#: u = 0.3 (slope 55), and the 288 stored calibration designs of tier 3 keep their worst
+#: error (2.5e-8 with that rule), at about 1.8x the tier's value time.
 STEEP_SLOPE = 35.0
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
@@ -922,17 +929,22 @@ def _radial_applies(options, signal, noise) -> bool:
             and options["se_nodes"] is not None and signal.isotropic and noise.isotropic)
 
 
+#: The most plans (the default's two weak tiers) that the first one-ray plan serves.
+_WEAK_PLANS = 2
+
+
 def _radial_plans(plans):
     """The one-ray plans standing in for ``plans`` on rotationally symmetric designs, and the
     first plan index of the second group.
 
-    The plans are split in two halves, each served by its last (finest) plan's grid counts
-    along the ray: one-ray plans cost a few ms at most, and they add to the compile time of
-    the default (two plans: about 10-15 % more CPU time to compile its value_and_grad), so
-    two cover its four tiers (the weak ones with the second tier's counts, the strong ones
-    with the fourth's).
+    The plans are split in two groups, each served by its last (finest) plan's grid counts
+    along the ray: the first half of the plans, at most ``_WEAK_PLANS`` of them, and the
+    rest. One-ray plans cost a few ms at most, and they add to the compile time of the
+    default (two plans: about 10-15 % more CPU time to compile its value_and_grad), so two
+    cover its five tiers (the weak ones with the second tier's counts, the strong ones with
+    the steep tier's).
     """
-    split = -(-len(plans) // 2)
+    split = min(_WEAK_PLANS, -(-len(plans) // 2))
     groups = (plans[:split], plans[split:]) if len(plans) > 1 else (plans,)
     radial = tuple(
         ({**{k: v for k, v in group[-1][0].items() if k != "_remat_otf"}, "_radial": True},

@@ -17,16 +17,20 @@ from jmse_jax._merit import _route, _strength, _tier_index
 SIGNAL, NOISE = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
 
 # One design per tier: nearly diffraction limited (strength 0.2), the paper's Fig. 1 (3.1),
-# every term at 5 waves at field 0.8 (14.7) and at full field (17.4).
+# every term at 3 waves at field 0.8 (8.8), and every term at 5 waves at full field
+# (strength 17.4, but a wavefront slope of 62 waves per pupil radius, past STEEP_SLOPE: the
+# steep tier).
 DESIGNS = [
     (jj.Seidel(w020=0.3, w222=0.2), 0.5, 0.2, 0),
     (jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198), 0.95, 0.2, 1),
     (jj.Seidel(w020=3.0, w040=3.0, w131=3.0, w222=3.0, w220=3.0), 0.8, 0.2, 2),
-    (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 1.0, 0.2, 3),
+    (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 1.0, 0.2, 4),
 ]
-# Strength 14.7 (tier 2's range) but a wavefront slope of 52 waves per pupil radius, past
-# STEEP_SLOPE: the last tier.
-ALL_5 = (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 0.8, 0.2, 3)
+# Strength 14.7 (tier 2's range) but a wavefront slope of 52: the steep tier.
+ALL_5 = (jj.Seidel(w020=5.0, w040=5.0, w131=5.0, w222=5.0, w220=5.0), 0.8, 0.2, 4)
+# The tier-2 design above (slope 31) on a wider band, u = 0.5: strength 22, not steep, so
+# tier 3.
+STRONG = (jj.Seidel(w020=3.0, w040=3.0, w131=3.0, w222=3.0, w220=3.0), 0.8, 0.5, 3)
 # A second middle-tier design (strength 2.0) that keeps the shortcut's first grid (the
 # check agrees with it to 1.8e-6, its error estimate is 1.7e-6).
 FIRST_KEPT = (jj.Seidel(w020=1.52, w040=0.23, w131=-1.02, w222=1.73, w220=-1.18), 0.9, 0.2, 1)
@@ -68,16 +72,21 @@ def test_tier_index_honours_both_bounds():
     assert int(_tier_index(3.0, 0.2, tiers)) == 1
     assert int(_tier_index(9.0, 0.2, tiers)) == 2
     # A design steeper than STEEP_SLOPE (max |grad W| = strength / min(sqrt(2) u, 1), here
-    # 35.4 and 42.4 waves per pupil radius) takes the last tier whatever its strength.
-    assert int(_tier_index(10.0, 0.2, tiers)) == 3
-    assert int(_tier_index(3.0, 0.05, tiers)) == 3
+    # 35.4 and 42.4 waves per pupil radius) takes the last tier (the steep one) whatever its
+    # strength.
+    assert int(_tier_index(10.0, 0.2, tiers)) == 4
+    assert int(_tier_index(3.0, 0.05, tiers)) == 4
     assert int(_tier_index(9.8, 0.2, tiers)) == 2  # slope 34.6
+    assert int(_tier_index(50.0, 0.2, tiers)) == 4
+    # Strong designs that are not steep take the fourth tier (slope 28.3 and 34.6 here).
+    assert int(_tier_index(20.0, 0.5, tiers)) == 3
+    assert int(_tier_index(24.5, 0.5, tiers)) == 3
+    assert int(_tier_index(25.0, 0.5, tiers)) == 4  # slope 35.4
     # Rays reaching the cutoff (u > 1/sqrt(2)) need the fourth tier's radial nodes from
     # strength 5 on; weaker designs keep the second tier's grid.
     assert int(_tier_index(10.0, 0.72, tiers)) == 3
     assert int(_tier_index(3.0, 0.72, tiers)) == 1
     assert int(_tier_index(10.0, 0.7, tiers)) == 2
-    assert int(_tier_index(50.0, 0.2, tiers)) == 3
     assert [t[0] for t in tiers] == sorted(t[0] for t in tiers) and tiers[-1][0] == math.inf
 
 
@@ -109,7 +118,7 @@ def _fixed32(ab, field, u, grid):
 
 @pytest.mark.parametrize("ab, field, u, tier, path", [
     (*DESIGNS[0], "first"), (*DESIGNS[1], "first"), (*FIRST_KEPT, "first"),
-    (*DEFOCUS_M6, "grid"), (*DESIGNS[2], "grid"), (*DESIGNS[3], "grid"),
+    (*DEFOCUS_M6, "grid"), (*DESIGNS[2], "grid"), (*STRONG, "grid"), (*DESIGNS[3], "grid"),
 ])
 def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
     """Eager, jit and value_and_grad all run the tier the strength selects,
@@ -155,7 +164,7 @@ def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
 # the same derivative rule (JAX linearises the rule and transposes its linear part).
 @pytest.mark.slow
 @pytest.mark.parametrize("ab, field, u, tier", [
-    DESIGNS[0], DESIGNS[1], FIRST_KEPT, DEFOCUS_M6, DESIGNS[2], DESIGNS[3]])
+    DESIGNS[0], DESIGNS[1], FIRST_KEPT, DEFOCUS_M6, DESIGNS[2], STRONG, DESIGNS[3]])
 def test_forward_mode_of_the_default_equals_reverse_mode(ab, field, u, tier):
     """d/dt jmse(w020 + t) equals the reverse-mode gradient, in every tier and path."""
     _, gradient = _default_value_and_grad(ab, field, u, SIGNAL, NOISE)
@@ -289,7 +298,7 @@ def test_shortcut_keeps_the_middle_tier_accurate(ab, field, u, name):
     assert abs(value - reference) <= 1e-5 * reference
 
 
-@pytest.mark.parametrize("w131, tier", [(14.647, 2), (19.193, 3)])
+@pytest.mark.parametrize("w131, tier", [(14.647, 2), (19.193, 4)])
 def test_strong_coma_alone_is_accurate(w131, tier):
     """One strong term, outside the calibration's +-8-wave box: pure coma at full field,
     u = 0.3, strength 14.5 and 19. Its phase difference varies along the overlap lens's
