@@ -49,9 +49,13 @@ import recheck_tiers  # noqa: E402
 import jmse_jax as jj  # noqa: E402
 from jmse_jax._merit import _tier_index  # noqa: E402
 
-#: Tiers 2 and 3 as calibrated up to session 53.
+#: Tiers 2 and 3 as calibrated up to session 53 (the steep tier, tier 4 since session 56,
+#: did not exist: its designs took tier 3).
 PREVIOUS = {2: dict(nodes=(56, 28), se_nodes=(2400, 128), overlap_nodes=(40, 24)),
             3: dict(nodes=(80, 32), se_nodes=(2400, 256), overlap_nodes=(56, 24))}
+PREVIOUS[4] = PREVIOUS[3]
+#: The strong tiers: 2, 3 and the steep tier.
+STRONG = tuple(range(2, len(jj.DEFAULT_TIERS)))
 REFERENCE = dict(nodes=(160, 96), se_nodes=(8000, 1920), overlap_nodes=(96, 96))
 REFERENCE_4800 = dict(REFERENCE, se_nodes=(4800, 1920))
 TERMS = ("w131", "w222")
@@ -77,10 +81,10 @@ def _default_tiers(grids: dict):
 
 
 def _scaled(factor: int) -> dict:
-    """Tiers 2 and 3 with ``factor`` times their radial OTF and S_e counts (the one-ray
+    """The strong tiers with ``factor`` times their radial OTF and S_e counts (the one-ray
     plans take their counts along the ray from these)."""
     out = {}
-    for index in (2, 3):
+    for index in STRONG:
         grid = jj.DEFAULT_TIERS[index][2]
         out[index] = dict(grid, nodes=(factor * grid["nodes"][0], grid["nodes"][1]),
                           se_nodes=(factor * grid["se_nodes"][0], grid["se_nodes"][1]))
@@ -145,7 +149,7 @@ def main() -> None:
     calibration = recheck_tiers._designs()
     tiers = jj.DEFAULT_TIERS
     by_tier = []
-    for index in (2, 3):
+    for index in STRONG:
         served = [d for d in calibration
                   if int(_tier_index(d["strength"], d["u"], tiers)) == index]
         row = dict(tier=index, designs=len(served))
@@ -169,7 +173,8 @@ def main() -> None:
              f"(nodes {REFERENCE['nodes']}, se_nodes {REFERENCE['se_nodes']}, overlap "
              f"{REFERENCE['overlap_nodes']}); the reference's own change from 4800 fine "
              "radial nodes in the last column. Previous: tiers 2 and 3 of session 53 "
-             f"({PREVIOUS[2]}, {PREVIOUS[3]}); present: `DEFAULT_TIERS`.", "",
+             f"({PREVIOUS[2]}, {PREVIOUS[3]}; the latter stands in for the steep tier 4 "
+             "too, which did not exist); present: `DEFAULT_TIERS`.", "",
              "| term | u | strength | coefficient [waves] | previous | present | "
              "reference 4800 vs 8000 |", "|---|---|---|---|---|---|---|"]
     for d in singles:
@@ -197,7 +202,7 @@ def main() -> None:
                          f"{r['worst']:.1e} | {r['p90']:.1e} | {r['median']:.1e} | "
                          f"{common.fmt_seconds(r['value_s'])} |")
     report = dict(machine=machine, reference=REFERENCE, previous=PREVIOUS,
-                  present={i: jj.DEFAULT_TIERS[i][2] for i in (2, 3)},
+                  present={i: jj.DEFAULT_TIERS[i][2] for i in STRONG},
                   single_term=singles, axis=axis, calibration=by_tier)
     common.write_report("single_term_tiers", report, lines)
 

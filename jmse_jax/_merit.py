@@ -227,19 +227,18 @@ DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
                               overlap_floor=64),
      None),
 )
-#: Designs whose wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius]
-#: exceeds this take the last tier (the steep one) whatever their strength. The strength scales the slope
-#: by ``min(sqrt(2) u, 1)``, so at small ``u`` a design of moderate strength holds many
-#: waves, and the phase difference across the overlap lens, which grows with the slope,
-#: outgrows the weaker tiers' overlap rules: on 48 designs of one term at u 0.1-0.3
-#: (``benchmarks/small_u_single_terms.py``, session 55) 22 were more than 1e-4 off (8.5e-3 for
-#: 22 waves of coma at u = 0.2, strength 14.5), each with a slope above 35; the calibration
-#: designs reach 35-42. They take a last tier whose overlap rule is raised from tier 3's
-#: (56, 40) with the presets' floor 24 to (64, 64) on every panel: on 55 designs of slope 45-67 at u
-#: 0.1-0.3 (single terms and mixtures) it is within 6.9e-5 of converged references, where
-#: (56, 56) with floor 56 left 2.3e-3 and (64, 64) with floor 40 1.6e-4 on a mixture at
-#: u = 0.3 (slope 55), and the 288 stored calibration designs of tier 3 keep their worst
-#: error (2.5e-8 with that rule), at about 1.8x the tier's value time.
+#: Designs whose wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius] exceeds
+#: this take the last tier (the steep one) whatever their strength. The strength scales the slope by
+#: ``min(sqrt(2) u, 1)``, so at small ``u`` a design of moderate strength holds many waves, and the
+#: phase difference across the overlap lens, which grows with the slope, outgrows the weaker tiers'
+#: overlap rules: on 48 designs of one term at u 0.1-0.3 (``benchmarks/small_u_single_terms.py``,
+#: session 55) 22 were more than 1e-4 off (8.5e-3 for 22 waves of coma at u = 0.2, strength 14.5),
+#: each with a slope above 35; the calibration designs reach 35-42. They take a last tier whose
+#: overlap rule is raised from tier 3's (56, 40) with the presets' floor 24 to (64, 64) on every
+#: panel: on 55 designs of slope 45-67 at u 0.1-0.3 (single terms and mixtures) it is within 6.9e-5
+#: of converged references, where (56, 56) with floor 56 left 2.3e-3 and (64, 64) with floor 40
+#: 1.6e-4 on a mixture at u = 0.3 (slope 55), and the 288 stored calibration designs of tier 3 keep
+#: their worst error (2.5e-8 with that rule), at about 1.8x the tier's value time.
 STEEP_SLOPE = 35.0
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
@@ -877,17 +876,21 @@ class _Static:
         return isinstance(other, _Static) and self._key == other._key
 
 
-#: How the two strongest tiers' reverse passes treat their overlap blocks (``_remat_otf``):
+#: How the strong tiers' reverse passes treat their overlap blocks (``_remat_otf``):
 #: ``"all"`` recomputes every radial panel's blocks, ``True`` the inner panels' only.
 _REMAT_OTF = "all"
+#: The default's weak tiers: the first one-ray plan serves at most this many plans, and
+#: the tiers after them recompute their overlap blocks in the reverse pass.
+_WEAK_PLANS = 2
 
 
 def _tier_plans(options, tiers):
     """Each tier's full option set and its shortcut's ``(trial, check, rtol, u_max, first,
     first_tol)`` (or None; a grid not given is None).
 
-    The two strongest tiers' reverse passes recompute their overlap blocks (``_remat_otf``,
-    ``_REMAT_OTF``) instead of storing their chord moments. All tiers share one executable
+    The strong tiers' reverse passes (every tier after the two weak ones; with fewer tiers,
+    the two strongest) recompute their overlap blocks (``_remat_otf``, ``_REMAT_OTF``)
+    instead of storing their chord moments. All tiers share one executable
     whose scratch is sized for the largest branch, and above about 32 MB XLA's CPU runtime
     maps scratch afresh on every call and pays a page fault per 4 kB, which every design
     then pays, the Fig. 1 point's shortcut included. With the last tier's inner panels
@@ -915,7 +918,7 @@ def _tier_plans(options, tiers):
                      else {**options, **shortcut.first, "peaks": False},
                      float(shortcut.first_tol))
         full = {**options, **grid}
-        if i >= len(tiers) - 2:
+        if i >= min(len(tiers) - 2, _WEAK_PLANS):
             full["_remat_otf"] = _REMAT_OTF
         plans.append((full, short))
     return tuple(plans)
@@ -927,10 +930,6 @@ def _radial_applies(options, signal, noise) -> bool:
     that depend on ``|nu|`` only."""
     return (options["quadrature"] == "polar" and options["otf_method"] == "overlap"
             and options["se_nodes"] is not None and signal.isotropic and noise.isotropic)
-
-
-#: The most plans (the default's two weak tiers) that the first one-ray plan serves.
-_WEAK_PLANS = 2
 
 
 def _radial_plans(plans):
