@@ -173,6 +173,9 @@ _FIRST_TOL = 1e-5
 _SHORTCUT = TierShortcut(trial=None, check=_CHECK_GRID, rtol=1e-5, u_max=_REACHES_CUTOFF_U,
                          first=_FIRST_GRID, first_tol=_FIRST_TOL)
 
+#: The fourth tier's grid; the steep tier's differs in its overlap rule only.
+_TIER3_GRID = dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(56, 40))
+
 #: Grids of the ``"default"`` preset by difficulty: ``(largest aberration_strength, largest
 #: u, grid options, shortcut)``; the first tier whose two bounds hold is used, and a design
 #: steeper than ``STEEP_SLOPE`` takes the last (the steep tier). The coarse
@@ -220,24 +223,22 @@ DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
      _SHORTCUT),
     (15.0, _REACHES_CUTOFF_U, dict(nodes=(64, 40), se_nodes=(4800, 128), overlap_nodes=(40, 32)),
      None),
-    (math.inf, math.inf, dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(56, 40)),
-     None),
+    (math.inf, math.inf, _TIER3_GRID, None),
     # The steep tier: reached only through STEEP_SLOPE (the tier before it has no bound).
-    (math.inf, math.inf, dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(64, 64),
-                              overlap_floor=64),
-     None),
+    (math.inf, math.inf, dict(_TIER3_GRID, overlap_nodes=(64, 64), overlap_floor=64), None),
 )
-#: Designs whose wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius] exceeds
-#: this take the last tier (the steep one) whatever their strength. The strength scales the slope by
-#: ``min(sqrt(2) u, 1)``, so at small ``u`` a design of moderate strength holds many waves, and the
-#: phase difference across the overlap lens, which grows with the slope, outgrows the weaker tiers'
-#: overlap rules: on 48 designs of one term at u 0.1-0.3 (``benchmarks/small_u_single_terms.py``,
-#: session 55) 22 were more than 1e-4 off (8.5e-3 for 22 waves of coma at u = 0.2, strength 14.5),
-#: each with a slope above 35; the calibration designs reach 35-42. They take a last tier whose
-#: overlap rule is raised from tier 3's (56, 40) with the presets' floor 24 to (64, 64) on every
-#: panel: on 55 designs of slope 45-67 at u 0.1-0.3 (single terms and mixtures) it is within 6.9e-5
-#: of converged references, where (56, 56) with floor 56 left 2.3e-3 and (64, 64) with floor 40
-#: 1.6e-4 on a mixture at u = 0.3 (slope 55), and the 288 stored calibration designs of tier 3 keep
+#: Designs whose wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius]
+#: exceeds this take the last tier (the steep one) whatever their strength. The strength
+#: scales the slope by ``min(sqrt(2) u, 1)``, so at small ``u`` a design of moderate
+#: strength holds many waves, and the phase difference across the overlap lens, which grows
+#: with the slope, outgrows the weaker tiers' overlap rules: on 48 designs of one term at u
+#: 0.1-0.3 (``benchmarks/small_u_single_terms.py``, session 55) 22 were more than 1e-4 off
+#: (8.5e-3 for 22 waves of coma at u = 0.2, strength 14.5), each with a slope above 35; the
+#: calibration designs reach 35-42. They take a last tier whose overlap rule is raised from
+#: tier 3's (56, 40) with the presets' floor 24 to (64, 64) on every panel: on 55 designs of
+#: slope 45-67 at u 0.1-0.3 (single terms and mixtures) it is within 6.9e-5 of converged
+#: references, where (56, 56) with floor 56 left 2.3e-3 and (64, 64) with floor 40 1.6e-4 on
+#: a mixture at u = 0.3 (slope 55), and the 288 stored calibration designs of tier 3 keep
 #: their worst error (2.5e-8 with that rule), at about 1.8x the tier's value time.
 STEEP_SLOPE = 35.0
 
