@@ -883,6 +883,18 @@ _REMAT_OTF = "all"
 #: The default's weak tiers: the first one-ray plan serves at most this many plans, and
 #: the tiers after them recompute their overlap blocks in the reverse pass.
 _WEAK_PLANS = 2
+#: The grids of the default's two one-ray plans (weak, strong), over the last tier of each
+#: group (``_radial_plans``). Until 2026-12-01 each plan took its group's last grid as it
+#: stands, which holds on single terms but not on defocus balanced against spherical
+#: aberration (``W = c (rho^2 + r rho^4)``, r in -1.5..-0.3): the phase difference then varies
+#: along the overlap chords with the spherical term, which such designs hold in far greater
+#: amounts than their slope says, and the OTF ripples along the ray more finely. On 1000
+#: such designs (and single terms) up to strength 45 and slope 65, u 0.05-1.2, noise 1e-3
+#: and 1e-4 (``benchmarks/balanced_one_ray.py``), the plans as they were left 13 of 580
+#: weak designs (worst 2.4e-2) and 62 of 420 strong ones (worst 1.5e-1) more than 1e-4 off;
+#: with these grids the worst are 4.4e-7 and 1.5e-5. The plans cost a few ms either way.
+_RAY_GRIDS = (dict(nodes=(48, 20), overlap_nodes=(40, 40)),
+              dict(nodes=(192, 48), overlap_nodes=(128, 96)))
 
 
 def _tier_plans(options, tiers):
@@ -938,18 +950,18 @@ def _radial_plans(plans):
     first plan index of the second group.
 
     The plans are split in two groups, each served by its last (finest) plan's grid counts
-    along the ray: the first half of the plans, at most ``_WEAK_PLANS`` of them, and the
-    rest. One-ray plans cost a few ms at most, and they add to the compile time of the
-    default (two plans: about 10-15 % more CPU time to compile its value_and_grad), so two
-    cover its five tiers (the weak ones with the second tier's counts, the strong ones with
-    the steep tier's).
+    along the ray, with ``_RAY_GRIDS`` over them when there are two groups: the first half
+    of the plans, at most ``_WEAK_PLANS`` of them, and the rest. One-ray plans cost a few
+    ms at most, and they add to the compile time of the default (two plans: about 10-15 %
+    more CPU time to compile its value_and_grad), so two cover its five tiers.
     """
     split = min(_WEAK_PLANS, -(-len(plans) // 2))
     groups = (plans[:split], plans[split:]) if len(plans) > 1 else (plans,)
+    overrides = _RAY_GRIDS if len(groups) == len(_RAY_GRIDS) else ({},) * len(groups)
     radial = tuple(
-        ({**{k: v for k, v in group[-1][0].items() if k != "_remat_otf"}, "_radial": True},
-         None)
-        for group in groups)
+        ({**{k: v for k, v in group[-1][0].items() if k != "_remat_otf"}, **grid,
+          "_radial": True}, None)
+        for group, grid in zip(groups, overrides, strict=True))
     return radial, split
 
 
