@@ -12,9 +12,9 @@ ripples more finely along the ray. This script measures the plans as they were
 (``before``: ``_merit._RAY_GRIDS`` emptied) and as they are (``after``) against a one-ray
 reference with every count far past theirs, on designs of each ratio ``r`` (and pure defocus
 and pure spherical aberration) scaled to strengths 1-45 (the one-ray plans' checked bound)
-and slopes up to ``CHECKED_SLOPE``, at u 0.05-1.2 and noise 1e-3, 1e-4 and 1e-6.
+and slopes up to ``CHECKED_SLOPE``, at u 0.05-1.2 and noise 1e-3, 1e-4, 1e-6 and 1e-8 (peak S_x / S_n 1.6e5-1.6e10).
 
-Usage (from the repository root; about 6 min on 2 cores)::
+Usage (from the repository root; about 8 min on 2 cores)::
 
     .venv/bin/python benchmarks/balanced_one_ray.py
 
@@ -46,7 +46,7 @@ REFERENCE = dict(nodes=(384, 96), se_nodes=(9600, 256), overlap_nodes=(192, 288)
 RATIOS = ("defocus", "spherical", -0.3, -0.5, -0.6, -0.7, -0.8, -1.0, -1.5, 0.5)
 US = (0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.2)
 STRENGTHS = (1.0, 2.0, 3.0, 5.0, 10.0, 20.0, 30.0, 45.0)
-NOISES = (1e-3, 1e-4, 1e-6)
+NOISES = (1e-3, 1e-4, 1e-6, 1e-8)
 SIGNAL = jj.MarkovSignal(1.0, 5.0)
 
 

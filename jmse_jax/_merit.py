@@ -893,8 +893,8 @@ _WEAK_PLANS = 2
 #: and 1e-4 (``benchmarks/balanced_one_ray.py``), the plans as they were left 13 of 580
 #: weak designs (worst 2.4e-2) and 62 of 420 strong ones (worst 1.5e-1) more than 1e-4 off;
 #: with these grids the worst are 4.4e-7 and 1.5e-5. The plans cost a few ms either way.
-_RAY_GRIDS = (dict(nodes=(48, 20), overlap_nodes=(40, 40)),
-              dict(nodes=(192, 48), overlap_nodes=(128, 96)))
+_RAY_GRIDS = (dict(nodes=(56, 20), overlap_nodes=(48, 48)),
+              dict(nodes=(256, 48), overlap_nodes=(128, 96)))
 
 
 def _tier_plans(options, tiers):

@@ -128,6 +128,34 @@ def test_strong_design_near_the_cutoff_against_a_finer_ray():
     assert value == pytest.approx(expected, rel=1e-6)
 
 
+#: Defocus set against spherical aberration, ``W = c (rho^2 - 0.6 rho^4)``, noise 1e-4:
+#: (w020, u, group of the default's one-ray plans). Strength 5 at u = 0.2 (slope 18, weak)
+#: and 45 at u = 0.5 (slope 64, strong); the plans as they were until 2026-12-01 (each its
+#: group's last tier grid) were 2.4e-2 and 1.5e-1 off (``benchmarks/balanced_one_ray.py``).
+BALANCED = [(25.39, 0.2, 0), (91.42, 0.5, 1)]
+#: One ray with every count well past the plans' (the benchmark's reference agrees with it
+#: to 1e-10 on both designs).
+BALANCED_REFERENCE = dict(nodes=(256, 48), se_nodes=(9600, 256), overlap_nodes=(192, 192))
+
+
+@pytest.mark.parametrize("w020, u, group", BALANCED)
+def test_balanced_spherical_on_the_axis(w020, u, group):
+    """The default (as a user calls it) takes the one-ray plan of the design's group and is
+    within 2e-5 of the converged ray, where the group's last tier grid alone is > 1e-3 off."""
+    ab, noise = jj.Seidel(w020=w020, w040=-0.6 * w020), jj.WhiteNoise(1e-4)
+    tier = int(_tier_index(float(jj.aberration_strength(ab, 0.0, u)), u, jj.DEFAULT_TIERS))
+    plans = _merit._tier_plans(jj.jmse_options("default"), jj.DEFAULT_TIERS)
+    _, split = _radial_plans(plans)
+    assert int(tier >= split) == group
+    expected = _one_ray(ab, 0.0, u, noise=noise, **BALANCED_REFERENCE)
+    value = float(jj.jmse(ab, 0.0, u, SIGNAL, noise))
+    assert value == pytest.approx(expected, rel=2e-5)
+    last = plans[split - 1 if group == 0 else -1][0]
+    bare = _one_ray(ab, 0.0, u, noise=noise,
+                    **{k: last[k] for k in ("nodes", "se_nodes", "overlap_nodes")})
+    assert abs(bare / expected - 1.0) > 1e-3
+
+
 #: On-axis JMSE at high SNR as a 1-D adaptive integral (``scipy.integrate.quad``, relative
 #: tolerance 1e-11, breakpoints at the OTF's zeros, the OTF at an overlap rule of (96, 96);
 #: ``benchmarks/low_noise.py``, ``results/low_noise.json``): (Seidel coefficients, u,
