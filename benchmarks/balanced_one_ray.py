@@ -12,7 +12,8 @@ ripples more finely along the ray. This script measures the plans as they were
 (``before``: ``_merit._RAY_GRIDS`` emptied) and as they are (``after``) against a one-ray
 reference with every count far past theirs, on designs of each ratio ``r`` (and pure defocus
 and pure spherical aberration) scaled to strengths 1-45 (the one-ray plans' checked bound)
-and slopes up to ``CHECKED_SLOPE``, at u 0.05-1.2 and noise 1e-3, 1e-4, 1e-6 and 1e-8 (peak S_x / S_n 1.6e5-1.6e10).
+and slopes up to ``CHECKED_SLOPE``, at u 0.05-1.2 and noise 1e-3, 1e-4, 1e-6 and 1e-8 (peak
+``S_x / S_n`` 1.6e5-1.6e10).
 
 Usage (from the repository root; about 8 min on 2 cores)::
 

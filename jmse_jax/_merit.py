@@ -92,11 +92,14 @@ CHECKED_SLOPE = 65.0
 #: 1.6e6). Beyond it the peaks of ``S_e`` where the OTF nearly vanishes on a ring (designs
 #: near rotational symmetry), of width ``~ sqrt(S_n / S_x)``, grow narrower than the fine
 #: grids resolve (README, "Accuracy at low noise"); a concrete call that takes a polar grid
-#: of a preset gets a ``UserWarning``. Rotationally symmetric designs are exempt: their
-#: one-ray plans integrate those peaks in closed form (checked to a peak ratio of 1.6e16).
+#: of a preset gets a ``UserWarning``. Rotationally symmetric designs are held to
+#: ``CHECKED_SNR_PEAKS`` instead: their one-ray plans integrate those peaks in closed form
+#: (single terms checked to a peak ratio of 1.6e16; defocus balanced against spherical
+#: aberration within 7e-5 up to 1.6e8 but 1.4e-2 off at 1.6e10, ``balanced_one_ray.py``).
 CHECKED_SNR = 2e6
 #: ``CHECKED_SNR`` for calls with ``peaks=True`` (the ``"high"`` preset), whose polar grids
-#: integrate those peaks in closed form (``jmse_jax._ridges``): checked near the axis to
+#: integrate those peaks in closed form (``jmse_jax._ridges``), and for rotationally
+#: symmetric designs (one-ray plans, ``CHECKED_SNR``'s note): checked near the axis to
 #: a peak ratio of 1.6e8 (``benchmarks/low_noise.py``: values within 7e-6 (default) and
 #: 3e-9 (``"high"``) up to 1.6e9; gradients within 5e-5 and 4e-7 at 1.6e7, 7e-4 and 3e-6 at
 #: 1.6e8: near the axis at high SNR take ``"high"``).
@@ -1423,10 +1426,10 @@ def jmse(
     slope ``max |grad W|`` does (``CHECKED_SLOPE``, 65 waves per pupil radius: at small
     ``u`` a design of moderate strength can hold many waves), gets a
     ``UserWarning`` unless grid options are given, and so does a peak ``max S_x / S_n``
-    above ``CHECKED_SNR`` (2e6; ``CHECKED_SNR_PEAKS``, 2e8, with ``peaks``) for a design
-    that takes a polar grid: where the OTF nearly vanishes on a ring the peaks of ``S_e``
-    outgrow the grids (README, "Accuracy at low noise"; a rotationally symmetric design's
-    one-ray plan integrates them exactly).
+    above ``CHECKED_SNR`` (2e6; ``CHECKED_SNR_PEAKS``, 2e8, with ``peaks`` or for a
+    rotationally symmetric design, whose one-ray plan integrates them in closed form): where
+    the OTF nearly vanishes on a ring the peaks of ``S_e`` outgrow the grids (README,
+    "Accuracy at low noise").
     Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
     under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u``, the spectra's
     parameters) give ``+inf`` (never NaN) with zero gradient.
@@ -1625,16 +1628,18 @@ def _peak_snr(u, signal, noise):
 def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False):
     """A ``UserWarning`` when the concrete spectra's peak ``S_x / S_n`` exceeds
     ``CHECKED_SNR`` (for calls with a preset's grids), or ``CHECKED_SNR_PEAKS`` with the
-    closed-form peaks (``peaks``)."""
+    closed-form peaks (``peaks``: the option, or a one-ray plan)."""
     snr = float(_peak_snr(u, signal, noise))
     if peaks:
         if snr > CHECKED_SNR_PEAKS:
             warnings.warn(
                 f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
-                f"polar grids with closed-form peaks were checked at "
-                f"({CHECKED_SNR_PEAKS:.0e}; benchmarks/low_noise.py): near the axis the "
-                f"JMSE and its gradient may be off by more than 1e-4. Give finer se_nodes "
-                f"and compare two of them",
+                f"grids with closed-form peaks (peaks=True, and the one-ray plans of designs "
+                f"on the axis) were checked at ({CHECKED_SNR_PEAKS:.0e}; "
+                f"benchmarks/low_noise.py, benchmarks/balanced_one_ray.py): on and near the "
+                f"axis the JMSE and its gradient may be off by more than 1e-4 (1e-2 measured "
+                f"at 1.6e10 on defocus balanced against spherical aberration). Give finer "
+                f"grids and compare two of them",
                 UserWarning, stacklevel=stacklevel)
         return
     if snr > CHECKED_SNR:
@@ -1697,8 +1702,9 @@ def _concrete_merit(static, inputs, warn=False):
         warnings.warn(_strength_message(f"{strength:.3g}"), UserWarning, stacklevel=3)
     elif warn and steep:
         warnings.warn(_slope_message(f"{float(slope):.3g}"), UserWarning, stacklevel=3)
-    if warn and not symmetric:  # the one-ray plans integrate the peaks in closed form
-        _warn_beyond_checked_snr(*inputs[2:], stacklevel=4, peaks=static.value[0]["peaks"])
+    if warn:  # the one-ray plans integrate the peaks in closed form, as peaks=True does
+        _warn_beyond_checked_snr(*inputs[2:], stacklevel=4,
+                                 peaks=bool(symmetric) or static.value[0]["peaks"])
     plan = plans[index]
     if symmetric:
         radial_plans, split = _radial_plans(plans)

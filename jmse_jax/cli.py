@@ -223,10 +223,13 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
             if beyond.any():
                 warnings.warn(_beyond_message(message, float(values[beyond].max()),
                                               int(beyond.sum()), n), UserWarning, stacklevel=2)
-        if not symmetric.all():  # the one-ray plans integrate the peaks in closed form
+        if not symmetric.all():
             u_max = jnp.asarray(np.max(np.asarray(u)[~symmetric]), np.asarray(u).dtype)
             _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=2,
                                      peaks=jmse_options(preset)["peaks"])
+        else:  # every design on the axis: the one-ray plans integrate the peaks in closed form
+            u_max = jnp.asarray(np.max(np.asarray(u)), np.asarray(u).dtype)
+            _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=2, peaks=True)
     texts = [" ".join(str(w.message).split()) for w in caught]
     for text in texts:
         print(f"jmse-jax: warning: {text}", file=sys.stderr, flush=True)

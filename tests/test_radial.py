@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -130,11 +131,11 @@ def test_strong_design_near_the_cutoff_against_a_finer_ray():
 
 #: Defocus set against spherical aberration, ``W = c (rho^2 - 0.6 rho^4)``, noise 1e-4:
 #: (w020, u, group of the default's one-ray plans). Strength 5 at u = 0.2 (slope 18, weak)
-#: and 45 at u = 0.5 (slope 64, strong); the plans as they were until 2026-12-01 (each its
+#: and 44.9 at u = 0.5 (slope 64, strong); the plans as they were until 2026-12-01 (each its
 #: group's last tier grid) were 2.4e-2 and 1.5e-1 off (``benchmarks/balanced_one_ray.py``).
-BALANCED = [(25.39, 0.2, 0), (91.42, 0.5, 1)]
+BALANCED = [(25.39, 0.2, 0), (91.3, 0.5, 1)]
 #: One ray with every count well past the plans' (the benchmark's reference agrees with it
-#: to 1e-10 on both designs).
+#: to 3e-13 on both designs).
 BALANCED_REFERENCE = dict(nodes=(256, 48), se_nodes=(9600, 256), overlap_nodes=(192, 192))
 
 
@@ -177,6 +178,19 @@ def test_peaks_at_the_otf_zeros_at_high_snr(coefficients, u, noise, expected):
     on the three 6-wave cases and 1.1e-5 on defocus 1 (``test_the_peak_correction_matters``)."""
     value = float(jmse_fn()(jj.Seidel(**coefficients), 0.0, u, SIGNAL, jj.WhiteNoise(noise)))
     assert value == pytest.approx(expected, rel=1e-8)
+
+
+@pytest.mark.parametrize("noise, warned", [(1e-6, False), (1e-7, True)])
+def test_a_design_on_the_axis_warns_past_the_one_ray_plans_checked_snr(noise, warned):
+    """One-ray designs are held to ``CHECKED_SNR_PEAKS`` (2e8; a noise of 1e-6 is a peak
+    ``S_x / S_n`` of 1.57e8, 1e-7 of 1.57e9), not to the polar grids' ``CHECKED_SNR``:
+    defocus balanced against spherical aberration was 1.4e-2 off at 1.6e10."""
+    assert 2 * math.pi * 25 / 1e-6 < jj.CHECKED_SNR_PEAKS < 2 * math.pi * 25 / 1e-7
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        jj.jmse(jj.Seidel(w020=1.0), 0.0, 0.2, SIGNAL, jj.WhiteNoise(noise))
+    messages = [str(w.message) for w in caught]
+    assert [("one-ray plans" in m and "2e+08" in m) for m in messages] == ([True] * warned)
 
 
 def test_the_peak_correction_matters(monkeypatch):
