@@ -14,6 +14,8 @@ from ._aberrations import (
     wavefront as wavefront,
 )
 from ._merit import (
+    CANCELLING_STRENGTH as CANCELLING_STRENGTH,
+    CHECKED_CANCELLATION as CHECKED_CANCELLATION,
     CHECKED_SLOPE as CHECKED_SLOPE,
     CHECKED_SNR as CHECKED_SNR,
     CHECKED_SNR_PEAKS as CHECKED_SNR_PEAKS,

@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
+from jax.flatten_util import ravel_pytree
 
 from ._aberrations import AbstractAberrations
 from ._numerics import (
@@ -55,6 +56,8 @@ __all__ = [
     "TierShortcut",
     "CHECKED_SNR",
     "CHECKED_SNR_PEAKS",
+    "CANCELLING_STRENGTH",
+    "CHECKED_CANCELLATION",
     "CHECKED_SLOPE",
     "CHECKED_STRENGTH",
     "SEQUENTIAL_VMAP_BACKENDS",
@@ -86,6 +89,21 @@ CHECKED_STRENGTH_ONE_RAY = 45.0
 #: were far off (74 waves of coma at u = 0.1, slope 173, 1.6e-1; 43 waves of defocus at
 #: u = 0.2, slope 87, 7e-3). A concrete design beyond it gets a ``UserWarning`` from ``jmse``.
 CHECKED_SLOPE = 65.0
+#: Terms that cancel each other's slope: a design off the axis whose ``cancellation`` (the
+#: ``aberration_strength`` of each of its terms alone, summed, over the design's own) is at
+#: least this, at a strength of at least ``CANCELLING_STRENGTH``, gets a ``UserWarning``
+#: from a concrete ``jmse`` call (and from ``eval`` and ``sweep``). The tiers were calibrated
+#: on random designs, whose terms seldom cancel (median 1.4); defocus set against spherical
+#: aberration, as a designer balances them (``W = c (rho^2 + r rho^4)``, cancellation 2-6
+#: for r in -1.5..-0.3), a hair off the axis was measured up to 8e-2 off at strength 15 and
+#: 3.5e-3 at strength 4 (``benchmarks/balanced_polar.py``): 64 of 398 such designs more than
+#: 1e-4 off, all of cancellation 3.2 or more and strength 3 or more (none of r = -1, whose
+#: cancellation is 3.0, nor -1.5). The bound also flags 23 of the calibration's 426 random
+#: designs, which the tiers hold. A tier for such designs is the fix (not built). On the
+#: axis the one-ray plans hold them (``_RAY_GRIDS``), and no warning is given there.
+CHECKED_CANCELLATION = 3.0
+#: The strength from which ``CHECKED_CANCELLATION`` applies.
+CANCELLING_STRENGTH = 2.5
 #: The largest peak signal-to-noise ratio ``max S_x / S_n`` over the band at which the
 #: presets' polar grids were checked to 1e-4 (a noise variance of about 8e-5 under
 #: ``MarkovSignal(1, 5)``, whose ``S_x(0)`` is 157; the bank's lowest noise, 1e-4, is
@@ -722,6 +740,22 @@ def _strength(aberrations, field, u):
     return slope * _band_reach(u)
 
 
+def _cancellation(aberrations, field, u):
+    """The ``aberration_strength`` of each term of ``aberrations`` alone (each coefficient,
+    tilt removed), summed, over the design's own (traceable; about 1 for a single term; no
+    gradient). ``+inf`` for a design of zero strength with nonzero terms cannot occur (a
+    term's slope is at most the sum's); 0 / 0 gives 1."""
+    aberrations = jax.lax.stop_gradient(aberrations.without_tilt())
+    flat, unravel = ravel_pytree(aberrations)
+    total = _strength(aberrations, field, u)
+    eye = jnp.eye(flat.shape[0], dtype=flat.dtype)
+    parts = jax.vmap(lambda e: _strength(unravel(e * flat), field, u))(eye)
+    return jnp.where(total > 0, jnp.sum(parts) / jnp.where(total > 0, total, 1.0), 1.0)
+
+
+_cancellation_jit = jax.jit(_cancellation)
+
+
 def _band_reach(u):
     """``min(sqrt(2) u, 1)``: the largest frequency the band reaches [cutoff units], the
     factor between a design's slope ``max |grad W|`` and its ``aberration_strength``."""
@@ -889,13 +923,20 @@ _WEAK_PLANS = 2
 #: The grids of the default's two one-ray plans (weak, strong), over the last tier of each
 #: group (``_radial_plans``). Until 2026-12-01 each plan took its group's last grid as it
 #: stands, which holds on single terms but not on defocus balanced against spherical
-#: aberration (``W = c (rho^2 + r rho^4)``, r in -1.5..-0.3): the phase difference then varies
-#: along the overlap chords with the spherical term, which such designs hold in far greater
-#: amounts than their slope says, and the OTF ripples along the ray more finely. On 1000
-#: such designs (and single terms) up to strength 45 and slope 65, u 0.05-1.2, noise 1e-3
-#: and 1e-4 (``benchmarks/balanced_one_ray.py``), the plans as they were left 13 of 580
-#: weak designs (worst 2.4e-2) and 62 of 420 strong ones (worst 1.5e-1) more than 1e-4 off;
-#: with these grids the worst are 4.4e-7 and 1.5e-5. The plans cost a few ms either way.
+#: aberration (``W = c (rho^2 + r rho^4)``, r in -1.5..-0.3), the designs a lens designer
+#: makes on purpose: they hold far more spherical aberration than their slope says, so the
+#: phase difference varies more along the overlap chords (the order along them binds) and
+#: the OTF ripples more finely along the ray (the coarse count binds). On 2000 such designs
+#: and single terms, strength 1-45, slope up to 65, u 0.05-1.2, noise 1e-3 to 1e-8
+#: (``benchmarks/balanced_one_ray.py``, ``results/balanced_one_ray.md``), the plans as they
+#: were left 49 of 1160 weak designs and 183 of 840 strong ones more than 1e-4 off (at
+#: noise 1e-4 alone: 9 and 34, worst 2.4e-2 and 1.5e-1). With these grids every design is
+#: within 7e-5 up to noise 1e-6 (peak S_x / S_n 1.6e8) and the weak ones within 8e-6 at
+#: 1e-8, while 29 strong ones are 1e-4 to 1.4e-2 off there (so designs on the axis are held
+#: to ``CHECKED_SNR_PEAKS``). Each grid is about the smallest that held: a weak plan of 48
+#: nodes with (40, 40) or (48, 48) left 1e-3 at 1e-8; a strong one of 192 nodes with
+#: (128, 96) 1.6e-3 at 1e-6, of 144 nodes 2.4e-4 at 1e-4, (120, 96) or (128, 80) 1.3e-4 and
+#: 3.9e-4 at 1e-4 (session 63).
 _RAY_GRIDS = (dict(nodes=(56, 20), overlap_nodes=(48, 48)),
               dict(nodes=(256, 48), overlap_nodes=(128, 96)))
 
@@ -1677,6 +1718,19 @@ def _slope_message(which: str) -> str:
             f"overlap_nodes and overlap_floor in particular (see jmse's docstring)")
 
 
+def _cancellation_message(which: str) -> str:
+    """The warning for a design (or designs: ``which``) whose terms cancel each other's slope
+    (``CHECKED_CANCELLATION``); the command line gives it too."""
+    return (f"the terms of the design cancel much of each other's wavefront slope: their "
+            f"aberration_strength taken one by one sums to {which} times the design's "
+            f"(checked to {CHECKED_CANCELLATION:g} from a strength of "
+            f"{CANCELLING_STRENGTH:g}). The default's tiers were calibrated on random designs "
+            f"and measured up to 8e-2 off on defocus set against spherical aberration off the "
+            f"axis (benchmarks/balanced_polar.py; on the axis the one-ray plans hold): compare "
+            f"two grids of your own, finer in every count (nodes, se_nodes, overlap_nodes, "
+            f"overlap_floor; see jmse's docstring)")
+
+
 def _beyond_checked(strength, u, symmetric):
     """``(strength beyond, slope beyond, slope)`` for designs (arrays or scalars) of the
     given ``aberration_strength``, ``u`` and symmetry."""
@@ -1702,6 +1756,11 @@ def _concrete_merit(static, inputs, warn=False):
         warnings.warn(_strength_message(f"{strength:.3g}"), UserWarning, stacklevel=3)
     elif warn and steep:
         warnings.warn(_slope_message(f"{float(slope):.3g}"), UserWarning, stacklevel=3)
+    elif warn and not symmetric and strength >= CANCELLING_STRENGTH:
+        cancellation = float(_cancellation_jit(*inputs[:3]))
+        if cancellation >= CHECKED_CANCELLATION:
+            warnings.warn(_cancellation_message(f"{cancellation:.3g}"), UserWarning,
+                          stacklevel=3)
     if warn:  # the one-ray plans integrate the peaks in closed form, as peaks=True does
         _warn_beyond_checked_snr(*inputs[2:], stacklevel=4,
                                  peaks=bool(symmetric) or static.value[0]["peaks"])

@@ -180,19 +180,23 @@ def _beyond_message(message, value: float, beyond: int = 1, n: int = 1) -> str:
 def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int = 1024) -> list:
     """The warnings ``jmse`` gives a concrete design, for designs that run under ``jit`` (where
     it cannot give them): ``aberration_strength`` beyond ``CHECKED_STRENGTH``, the wavefront
-    slope beyond ``CHECKED_SLOPE``, and peak ``S_x / S_n`` beyond ``CHECKED_SNR``. Leaves of
+    slope beyond ``CHECKED_SLOPE``, terms that cancel beyond ``CHECKED_CANCELLATION``, and
+    peak ``S_x / S_n`` beyond ``CHECKED_SNR``. Leaves of
     shape (n,), one design per row; the strength and symmetry of each come from the
     library's own choice of plan (``_concrete_choice``), the bounds from ``_beyond_checked``,
     the noise check is the library's (``_warn_beyond_checked_snr``). Each warning goes to
     stderr as one line; returns their texts."""
-    import functools
 
     import jax
     import jax.numpy as jnp
     import numpy as np
 
     from ._merit import (
+        CANCELLING_STRENGTH,
+        CHECKED_CANCELLATION,
         _beyond_checked,
+        _cancellation,
+        _cancellation_message,
         _concrete_choice,
         _prepare,
         _slope_message,
@@ -205,21 +209,30 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
     n = int(np.shape(field)[0])
     static, _ = _prepare((*jax.tree_util.tree_map(lambda x: x[0], designs), signal, noise),
                          jmse_options(preset))
-    choice = jax.jit(jax.vmap(functools.partial(_concrete_choice, static)))
+    def _choice(*design):
+        _, sym, st = _concrete_choice(static, *design)
+        return sym, st, _cancellation(*design)
+
+    choice = jax.jit(jax.vmap(_choice))
     size = min(n, chunk)
-    symmetric, strength = [], []
+    symmetric, strength, cancellation = [], [], []
     for start in range(0, n, size):  # fixed-size blocks: one compiled program
         index = np.minimum(np.arange(start, start + size), n - 1)
         block = jax.tree_util.tree_map(lambda x, index=index: x[index], designs)
-        _, sym, st = choice(*block)
+        sym, st, cancel = choice(*block)
         symmetric.append(np.asarray(sym)[: n - start])
         strength.append(np.asarray(st)[: n - start])
+        cancellation.append(np.asarray(cancel)[: n - start])
     symmetric, strength = np.concatenate(symmetric), np.concatenate(strength)
+    cancellation = np.concatenate(cancellation)
     strong, steep, slope = _beyond_checked(strength, np.asarray(u), symmetric)
+    cancelling = (~strong & ~steep & ~symmetric & (strength >= CANCELLING_STRENGTH)
+                  & (cancellation >= CHECKED_CANCELLATION))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         for message, beyond, values in ((_strength_message, strong, strength),
-                                        (_slope_message, steep, slope)):
+                                        (_slope_message, steep, slope),
+                                        (_cancellation_message, cancelling, cancellation)):
             if beyond.any():
                 warnings.warn(_beyond_message(message, float(values[beyond].max()),
                                               int(beyond.sum()), n), UserWarning, stacklevel=2)

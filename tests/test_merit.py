@@ -514,6 +514,42 @@ def test_design_beyond_the_checked_strength_warns():
         jj.jmse(jj.Seidel(w020=2.0, w131=0.5), 0.5, 0.5, signal, noise, preset="fast")
 
 
+def test_cancellation_of_terms_against_the_analytic_slopes():
+    """``_cancellation``: each term's strength alone, summed, over the design's. For
+    ``W = c (rho^2 - rho^4 / 2)`` the terms' slopes are 2c and 2c, the design's
+    ``max |2 c rho (1 - rho^2)|`` = 4c / (3 sqrt 3) at ``rho = 1/sqrt 3``: 3 sqrt 3 = 5.196
+    (the strength samples 12 radii, so a little more); one term alone is 1."""
+    from jmse_jax._merit import _cancellation_jit
+
+    balanced = float(_cancellation_jit(jj.Seidel(w020=4.0, w040=-2.0), 0.7, 0.5))
+    assert balanced == pytest.approx(3 * math.sqrt(3), rel=2e-3)
+    assert float(_cancellation_jit(jj.Seidel(w131=3.0), 0.7, 0.5)) == pytest.approx(1.0)
+    # Tilt is removed first (it hides in coma and is no term of its own here).
+    assert float(_cancellation_jit(jj.Seidel(w131=3.0, w111=5.0), 0.7, 0.5)) == pytest.approx(
+        1.0)
+
+
+def test_terms_that_cancel_warn_off_the_axis():
+    """Defocus set against spherical aberration a hair off the axis (``W = 10 rho^2 - 7
+    rho^4``, cancellation 6, strength 5.7): such designs were up to 8e-2 off in the polar
+    tiers (benchmarks/balanced_polar.py), so a concrete call warns. The same design on the
+    axis (its one-ray plan holds), pure spherical aberration of that strength, the Fig. 1
+    point (cancellation 1.9) and grids of the caller's own give no warning."""
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    design = dict(w020=10.0, w040=-7.0)
+    with pytest.warns(UserWarning, match=r"the terms of the design cancel much of each "
+                                         r"other's wavefront slope: their aberration_strength "
+                                         r"taken one by one sums to 6 times"):
+        jj.jmse(jj.Seidel(**design, w222=1e-7), 1.0, 0.5, signal, noise)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jj.jmse(jj.Seidel(**design), 1.0, 0.5, signal, noise)
+        jj.jmse(jj.Seidel(w040=1.5, w222=1e-7), 1.0, 0.5, signal, noise, preset="fast")
+        jj.jmse(jj.Seidel(**FIG1_COEFFICIENTS), 0.95, 0.2, signal, noise, preset="fast")
+        jj.jmse(jj.Seidel(**design, w222=1e-7), 1.0, 0.5, signal, noise, nodes=(16, 8),
+                se_nodes=(64, 16), overlap_nodes=(12, 12))
+
+
 def test_many_waves_at_small_u_take_the_last_tier_and_warn_beyond_it():
     """aberration_strength is the slope max |grad W| times min(sqrt(2) u, 1): 22 waves of
     coma at u = 0.2 is strength 14.5 (tier 2's range) but slope 51, where tier 2's overlap
@@ -552,8 +588,9 @@ def test_noise_beyond_the_checked_snr_warns():
     defocus with 0.5 of astigmatism at field 0.1): a concrete call that takes a polar grid
     warns, naming the ratio. Markov(1, 5) has S_x(0) = 2 pi 25 = 157.08, so a noise of
     1e-5 is a ratio of 1.57e7 and the bank's 1e-4 is inside. A design on the axis takes the
-    one-ray plan, which integrates the peaks in closed form (test_radial), and does not
-    warn even at 1.57e10; nor does a call with grids of its own."""
+    one-ray plan, which integrates the peaks in closed form (test_radial), and is held to
+    CHECKED_SNR_PEAKS instead (no warning at 1.57e8, one at 1.57e10); a call with grids of
+    its own gets none."""
     near_axis, signal = jj.Seidel(w020=6.0, w222=0.5), jj.MarkovSignal(1.0, 5.0)
     with pytest.warns(UserWarning, match=r"peak signal-to-noise ratio max S_x/S_n = 1\.57e\+07 "
                                          r"is beyond what the presets' polar grids"):
@@ -563,6 +600,10 @@ def test_noise_beyond_the_checked_snr_warns():
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-4), preset="fast")
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-7), nodes=(8, 4),
                 se_nodes=(16, 8), overlap_nodes=(8, 8))
+        jj.jmse(jj.Seidel(w020=6.0), 0.0, 0.2, signal, jj.WhiteNoise(1e-6), preset="fast")
+    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond what the grids "
+                                         r"with closed-form peaks \(peaks=True, and the one-ray "
+                                         r"plans of designs on the axis\) were checked at"):
         jj.jmse(jj.Seidel(w020=6.0), 0.0, 0.2, signal, jj.WhiteNoise(1e-8), preset="fast")
     assert 1.5e6 < 2 * math.pi * 25 / 1e-4 < jj.CHECKED_SNR < 2 * math.pi * 25 / 1e-5
     # With the closed-form peaks of jmse_jax._ridges the grids hold to CHECKED_SNR_PEAKS
@@ -572,8 +613,8 @@ def test_noise_beyond_the_checked_snr_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-5), preset="fast", peaks=True)
-    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+09 is beyond what the polar "
-                                         r"grids with closed-form peaks were checked at"):
+    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+09 is beyond what the grids "
+                                         r"with closed-form peaks"):
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-7), preset="fast", peaks=True)
 
 
