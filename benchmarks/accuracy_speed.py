@@ -252,7 +252,7 @@ def default_by_tier(cases) -> dict:
     from jmse_jax._merit import _radial_plans, _route, _tier_plans
     from jmse_jax._radial import radial_counts
 
-    _, split = _radial_plans(_tier_plans(jj.jmse_options(), jj.DEFAULT_TIERS))
+    radial, split = _radial_plans(_tier_plans(jj.jmse_options(), jj.DEFAULT_TIERS))
 
     value_fn = _jmse()
     vag_fn = jax.value_and_grad(value_fn, argnums=0)
@@ -267,7 +267,7 @@ def default_by_tier(cases) -> dict:
         if route["one_ray"]:
             last = split - 1 if tier < split else len(jj.DEFAULT_TIERS) - 1
             first = 0 if tier < split else split
-            ray = jj.DEFAULT_TIERS[last][2]
+            ray = radial[int(tier >= split)][0]  # the plan's grid (``_merit._RAY_GRIDS``)
             group = f"one ray (tiers {first}-{last})"
             counts = radial_counts(ray["nodes"], ray["se_nodes"])
             grid = dict(description=(
