@@ -59,6 +59,21 @@ def _unit(ratio) -> jj.Seidel:
     return jj.Seidel(w020=1.0, w040=float(ratio))
 
 
+def designs(ratios, us, strengths):
+    """``(ratio, u, strength, slope, design)`` for each ratio (or pure term), u and strength
+    whose slope is at most ``CHECKED_SLOPE``: ``W = c (rho^2 + r rho^4)`` scaled to it."""
+    for ratio in ratios:
+        unit = _unit(ratio)
+        unit_slope = float(jj.aberration_strength(unit, 0.0, 1.0))
+        for u in us:
+            for strength in strengths:
+                slope = strength / min(math.sqrt(2.0) * u, 1.0)
+                if slope <= jj.CHECKED_SLOPE:
+                    c = slope / unit_slope
+                    yield ratio, u, strength, slope, jj.Seidel(w020=c * unit.w020,
+                                                              w040=c * unit.w040)
+
+
 def _plans():
     """The default's one-ray plans as they are and with ``_RAY_GRIDS`` emptied, and the
     index of the first tier of the strong group."""
@@ -87,29 +102,18 @@ def main() -> None:
     runs = {"before": [program(p) for p in before], "after": [program(p) for p in after]}
     rows = []
     start = time.perf_counter()
-    for ratio in RATIOS:
-        unit = _unit(ratio)
-        unit_slope = float(jj.aberration_strength(unit, 0.0, 1.0))
-        for u in US:
-            reach = min(math.sqrt(2.0) * u, 1.0)
-            for strength in STRENGTHS:
-                slope = strength / reach
-                if slope > jj.CHECKED_SLOPE:
-                    continue
-                c = slope / unit_slope
-                ab = jj.Seidel(w020=c * unit.w020, w040=c * unit.w040)
-                tier = int(_merit._tier_index(jnp.asarray(strength), jnp.asarray(u), tiers))
-                group = int(tier >= split)
-                for noise in NOISES:
-                    ref = float(reference(ab, u, noise))
-                    row = dict(ratio=ratio, u=u, strength=strength, slope=slope,
-                               w020=float(ab.w020), w040=float(ab.w040), noise=noise,
-                               tier=tier, group=group, reference=ref)
-                    for name, programs in runs.items():
-                        row[name] = float(programs[group](ab, u, noise)) / ref - 1.0
-                    rows.append(row)
-            print(f"{ratio} u={u}: {len(rows)} designs, {time.perf_counter() - start:.0f} s",
-                  flush=True)
+    for ratio, u, strength, slope, ab in designs(RATIOS, US, STRENGTHS):
+        tier = int(_merit._tier_index(jnp.asarray(strength), jnp.asarray(u), tiers))
+        group = int(tier >= split)
+        for noise in NOISES:
+            ref = float(reference(ab, u, noise))
+            row = dict(ratio=ratio, u=u, strength=strength, slope=slope, w020=float(ab.w020),
+                       w040=float(ab.w040), noise=noise, tier=tier, group=group, reference=ref)
+            for name, programs in runs.items():
+                row[name] = float(programs[group](ab, u, noise)) / ref - 1.0
+            rows.append(row)
+        print(f"{ratio} u={u} strength {strength:g}: {len(rows)} designs, "
+              f"{time.perf_counter() - start:.0f} s", flush=True)
     # The default as a user calls it takes the same plan (a spot check on a few designs).
     spot = [r for r in rows if r["noise"] == 1e-4][::25]
     for r in spot:

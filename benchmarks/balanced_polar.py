@@ -28,6 +28,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import _common as common  # noqa: E402 - turns on float64
+import balanced_one_ray  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 from balanced_one_ray import REFERENCE  # noqa: E402
@@ -52,37 +53,27 @@ def main() -> None:
     tiers = jj.DEFAULT_TIERS
     rows = []
     start = time.perf_counter()
-    for ratio in RATIOS:
-        unit = jj.Seidel(w040=1.0) if ratio == "spherical" else jj.Seidel(w020=1.0, w040=ratio)
-        unit_slope = float(jj.aberration_strength(unit, 0.0, 1.0))
-        for u in US:
-            reach = min(math.sqrt(2.0) * u, 1.0)
-            for strength in STRENGTHS:
-                slope = strength / reach
-                if slope > jj.CHECKED_SLOPE:
-                    continue
-                c = slope / unit_slope
-                symmetric = jj.Seidel(w020=c * unit.w020, w040=c * unit.w040)
-                ab = jj.Seidel(w020=c * unit.w020, w040=c * unit.w040, w222=ASTIGMATISM)
-                actual = float(jj.aberration_strength(ab, FIELD, u))
-                tier = int(_merit._tier_index(jnp.asarray(actual), jnp.asarray(u), tiers))
-                for noise in NOISES:
-                    ref = float(reference(symmetric, u, noise))
-                    row = dict(ratio=ratio, u=u, strength=actual, slope=slope,
-                               w020=float(ab.w020), w040=float(ab.w040), noise=noise, tier=tier,
-                               reference=ref)
-                    with warnings.catch_warnings(record=True) as caught:
-                        warnings.simplefilter("always")
-                        for preset in ("default", "high"):
-                            value = float(jj.jmse(ab, FIELD, u, SIGNAL, jj.WhiteNoise(noise),
-                                                  preset=preset))
-                            row[preset] = value / ref - 1.0
-                    messages = [str(w.message) for w in caught]
-                    row["cancelling"] = any("cancel" in m for m in messages)
-                    row["warned"] = any("cancel" not in m for m in messages)
-                    rows.append(row)
-            print(f"{ratio} u={u}: {len(rows)} designs, {time.perf_counter() - start:.0f} s",
-                  flush=True)
+    for ratio, u, _, slope, symmetric in balanced_one_ray.designs(RATIOS, US, STRENGTHS):
+        ab = jj.Seidel(w020=symmetric.w020, w040=symmetric.w040, w222=ASTIGMATISM)
+        actual = float(jj.aberration_strength(ab, FIELD, u))
+        tier = int(_merit._tier_index(jnp.asarray(actual), jnp.asarray(u), tiers))
+        for noise in NOISES:
+            ref = float(reference(symmetric, u, noise))
+            row = dict(ratio=ratio, u=u, strength=actual, slope=slope,
+                       w020=float(ab.w020), w040=float(ab.w040), noise=noise, tier=tier,
+                       reference=ref)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                for preset in ("default", "high"):
+                    value = float(jj.jmse(ab, FIELD, u, SIGNAL, jj.WhiteNoise(noise),
+                                          preset=preset))
+                    row[preset] = value / ref - 1.0
+            messages = [str(w.message) for w in caught]
+            row["cancelling"] = any("cancel" in m for m in messages)
+            row["warned"] = any("cancel" not in m for m in messages)
+            rows.append(row)
+        print(f"{ratio} u={u} strength {actual:.3g}: {len(rows)} designs, "
+              f"{time.perf_counter() - start:.0f} s", flush=True)
     quiet = [r for r in rows if not r["warned"]]
     lines = ["# The default's polar tiers on defocus balanced against spherical aberration", "",
              common.machine_line(machine, common.load_average()), "",
