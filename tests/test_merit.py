@@ -527,24 +527,37 @@ def test_cancellation_of_terms_against_the_analytic_slopes():
     # Tilt is removed first (it hides in coma and is no term of its own here).
     assert float(_cancellation_jit(jj.Seidel(w131=3.0, w111=5.0), 0.7, 0.5)) == pytest.approx(
         1.0)
+    # Field curvature is defocus at a given field: one term (10 - 8 h^2 waves of defocus).
+    assert float(_cancellation_jit(jj.Seidel(w020=10.0, w220=-8.0), 1.0, 0.5)) == pytest.approx(
+        1.0)
+    # Astigmatism at the medial focus, W = 20 y^2 - 10 rho^2 = 10 (y^2 - x^2): slopes 40 and
+    # 20 alone, 20 together.
+    medial = float(_cancellation_jit(jj.Seidel(w020=-10.0, w222=20.0), 1.0, 0.5))
+    assert medial == pytest.approx(3.0, rel=1e-9)
 
 
 def test_terms_that_cancel_warn_off_the_axis():
     """Defocus set against spherical aberration a hair off the axis (``W = 10 rho^2 - 7
     rho^4``, cancellation 6, strength 5.7): such designs were up to 8e-2 off in the polar
     tiers (benchmarks/balanced_polar.py), so a concrete call warns. The same design on the
-    axis (its one-ray plan holds), pure spherical aberration of that strength, the Fig. 1
-    point (cancellation 1.9) and grids of the caller's own give no warning."""
+    axis (its one-ray plan holds), pure spherical aberration of that strength, defocus set
+    against field curvature (one shape), the Fig. 1 point (cancellation 1.1)
+    and grids of the caller's own give no warning."""
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
     design = dict(w020=10.0, w040=-7.0)
     with pytest.warns(UserWarning, match=r"the terms of the design cancel much of each "
                                          r"other's wavefront slope: their aberration_strength "
                                          r"taken one by one sums to 6 times"):
         jj.jmse(jj.Seidel(**design, w222=1e-7), 1.0, 0.5, signal, noise)
+    # Astigmatism at the medial focus (cancellation 3, strength 14) was 8.7e-3 off.
+    with pytest.warns(UserWarning, match=r"sums to 3 times"):
+        jj.jmse(jj.Seidel(w020=-10.0, w222=20.0), 1.0, 0.5, signal, noise, preset="fast")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         jj.jmse(jj.Seidel(**design), 1.0, 0.5, signal, noise)
         jj.jmse(jj.Seidel(w040=1.5, w222=1e-7), 1.0, 0.5, signal, noise, preset="fast")
+        jj.jmse(jj.Seidel(w020=10.0, w220=-8.0, w222=1e-7), 1.0, 0.5, signal, noise,
+                preset="fast")
         jj.jmse(jj.Seidel(**FIG1_COEFFICIENTS), 0.95, 0.2, signal, noise, preset="fast")
         jj.jmse(jj.Seidel(**design, w222=1e-7), 1.0, 0.5, signal, noise, nodes=(16, 8),
                 se_nodes=(64, 16), overlap_nodes=(12, 12))
