@@ -1737,14 +1737,17 @@ def _cancellation_message(which: str) -> str:
             f"overlap_floor; see jmse's docstring)")
 
 
-def _beyond_checked(strength, u, symmetric):
-    """``(strength beyond, slope beyond, slope)`` for designs (arrays or scalars) of the
-    given ``aberration_strength``, ``u`` and symmetry."""
+def _beyond_checked(strength, u, symmetric, cancellation=1.0):
+    """``(strength beyond, slope beyond, cancelling beyond, slope)`` for designs (arrays or
+    scalars) of the given ``aberration_strength``, ``u``, symmetry and ``_cancellation``
+    (each design gets at most one of the three)."""
     strength, u, symmetric = np.asarray(strength), np.asarray(u), np.asarray(symmetric, bool)
     slope = strength / np.asarray(_band_reach(u), strength.dtype)
     strong = strength > np.where(symmetric, CHECKED_STRENGTH_ONE_RAY, CHECKED_STRENGTH)
     steep = ~strong & (slope > CHECKED_SLOPE)
-    return strong, steep, slope
+    cancelling = (~strong & ~steep & ~symmetric & (strength >= CANCELLING_STRENGTH)
+                  & (np.asarray(cancellation) >= CHECKED_CANCELLATION))
+    return strong, steep, cancelling, slope
 
 
 def _concrete_merit(static, inputs, warn=False):
@@ -1757,16 +1760,17 @@ def _concrete_merit(static, inputs, warn=False):
     plans = _base_plans(static)
     index, symmetric, strength = _concrete_choice(static, *inputs[:3])
     index, symmetric, strength = int(index), int(symmetric), float(strength)
-    strong, steep, slope = _beyond_checked(strength, float(inputs[2]), symmetric)
+    # The cancellation only where it can matter (a small program of its own).
+    cancellation = (float(_cancellation_jit(*inputs[:3]))
+                    if warn and not symmetric and strength >= CANCELLING_STRENGTH else 1.0)
+    strong, steep, cancelling, slope = _beyond_checked(strength, float(inputs[2]), symmetric,
+                                                       cancellation)
     if warn and strong:
         warnings.warn(_strength_message(f"{strength:.3g}"), UserWarning, stacklevel=3)
     elif warn and steep:
         warnings.warn(_slope_message(f"{float(slope):.3g}"), UserWarning, stacklevel=3)
-    elif warn and not symmetric and strength >= CANCELLING_STRENGTH:
-        cancellation = float(_cancellation_jit(*inputs[:3]))
-        if cancellation >= CHECKED_CANCELLATION:
-            warnings.warn(_cancellation_message(f"{cancellation:.3g}"), UserWarning,
-                          stacklevel=3)
+    elif warn and cancelling:
+        warnings.warn(_cancellation_message(f"{cancellation:.3g}"), UserWarning, stacklevel=3)
     if warn:  # the one-ray plans integrate the peaks in closed form, as peaks=True does
         _warn_beyond_checked_snr(*inputs[2:], stacklevel=4,
                                  peaks=bool(symmetric) or static.value[0]["peaks"])

@@ -192,8 +192,6 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
     import numpy as np
 
     from ._merit import (
-        CANCELLING_STRENGTH,
-        CHECKED_CANCELLATION,
         _beyond_checked,
         _cancellation,
         _cancellation_message,
@@ -209,6 +207,7 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
     n = int(np.shape(field)[0])
     static, _ = _prepare((*jax.tree_util.tree_map(lambda x: x[0], designs), signal, noise),
                          jmse_options(preset))
+
     def _choice(*design):
         _, sym, st = _concrete_choice(static, *design)
         return sym, st, _cancellation(*design)
@@ -225,9 +224,8 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
         cancellation.append(np.asarray(cancel)[: n - start])
     symmetric, strength = np.concatenate(symmetric), np.concatenate(strength)
     cancellation = np.concatenate(cancellation)
-    strong, steep, slope = _beyond_checked(strength, np.asarray(u), symmetric)
-    cancelling = (~strong & ~steep & ~symmetric & (strength >= CANCELLING_STRENGTH)
-                  & (cancellation >= CHECKED_CANCELLATION))
+    strong, steep, cancelling, slope = _beyond_checked(strength, np.asarray(u), symmetric,
+                                                       cancellation)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         for message, beyond, values in ((_strength_message, strong, strength),
