@@ -117,7 +117,7 @@ def main() -> None:
             for strength in STRENGTHS:
                 ab = jj.Seidel(**{term: strength / unit})
                 static, _ = _prepare((ab, FIELD, u, SIGNAL, NOISE), jmse_options("default"))
-                tier, symmetric, _ = _concrete_choice(static, ab, FIELD, u)
+                tier, _, symmetric, *_ = _concrete_choice(static, ab, FIELD, u)
                 ref = float(reference(ab, FIELD, u))
                 error = float(default(ab, FIELD, u)) / ref - 1.0
                 e, e_along, e_across = spreads(ab.without_tilt(), FIELD,

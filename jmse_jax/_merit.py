@@ -56,6 +56,8 @@ __all__ = [
     "TierShortcut",
     "CHECKED_SNR",
     "CHECKED_SNR_PEAKS",
+    "BALANCED_CANCELLATION",
+    "BALANCED_GRID",
     "CANCELLING_STRENGTH",
     "CHECKED_CANCELLATION",
     "CHECKED_SLOPE",
@@ -91,21 +93,29 @@ CHECKED_STRENGTH_ONE_RAY = 45.0
 CHECKED_SLOPE = 65.0
 #: Terms that cancel each other's slope: a design off the axis whose ``cancellation`` (the
 #: ``aberration_strength`` of each of its terms alone, summed, over the design's own) is at
-#: least this, at a strength of at least ``CANCELLING_STRENGTH``, gets a ``UserWarning``
-#: from a concrete ``jmse`` call (and from ``eval`` and ``sweep``). The tiers were calibrated
-#: on random designs, whose terms seldom cancel (median 1.3); defocus set against spherical
-#: aberration, as a designer balances them (``W = c (rho^2 + r rho^4)``, cancellation 2-6
-#: for r in -1.5..-0.3), a hair off the axis was measured up to 8e-2 off at strength 15 and
-#: 3.5e-3 at strength 4 (``benchmarks/balanced_polar.py``): 64 of 398 such designs more than
-#: 1e-4 off, all of cancellation 3.2 or more and strength 3 or more (none of r = -1, whose
-#: cancellation is 3.0, nor -1.5); so was astigmatism at the medial focus, ``w020 = -w222
-#: h^2 / 2`` (cancellation 3.0), 8.7e-3 at strength 14 (u = 0.5). The bound, below 3 for
-#: that reason, also flags 33 of the calibration's 426 random designs, which the tiers hold.
-#: A tier for such designs is the fix (not built). On the axis the one-ray plans hold them
-#: (``_RAY_GRIDS``), and no warning is given there.
-CHECKED_CANCELLATION = 2.5
-#: The strength from which ``CHECKED_CANCELLATION`` applies.
+#: least this, at a strength of at least ``CANCELLING_STRENGTH``, takes the default's
+#: balanced tier (``BALANCED_GRID``), and with a preset that has none (``"fast"``,
+#: ``"high"``) gets a ``UserWarning`` from a concrete ``jmse`` call (and from ``eval`` and
+#: ``sweep``). The tiers were calibrated on random designs, whose terms seldom cancel
+#: (median 1.3); defocus set against spherical aberration, as a designer balances them
+#: (``W = c (rho^2 + r rho^4)``, cancellation 2-7 for r in -1.5..-0.3), a hair off the axis
+#: was measured up to 8e-2 off in those tiers at strength 15 and 3.5e-3 at strength 4
+#: (``benchmarks/balanced_polar.py``): 64 of 398 such designs more than 1e-4 off, all of
+#: cancellation 3.2 or more and strength 3 or more (none of r = -1, whose cancellation is
+#: 3.0, nor -1.5); so was astigmatism at the medial focus, ``w020 = -w222 h^2 / 2``
+#: (cancellation 3.0), 8.7e-3 at strength 14 (u = 0.5). The bound, below 3 for that reason,
+#: also sends 33 of the calibration's 426 random designs to the balanced tier. On the axis
+#: the one-ray plans hold such designs (``_RAY_GRIDS``).
+BALANCED_CANCELLATION = 2.5
+#: The strength from which ``BALANCED_CANCELLATION`` applies.
 CANCELLING_STRENGTH = 2.5
+#: The largest ``cancellation`` at which the balanced tier was checked: a design beyond it
+#: (off the axis, of strength at least ``CANCELLING_STRENGTH``) gets a ``UserWarning`` from
+#: a concrete default ``jmse`` call (and from ``eval`` and ``sweep``). Defocus against
+#: spherical aberration reaches 7.0 at ``r = -2/3``, the most for those two terms (3000
+#: random designs of defocus, spherical aberration, coma and astigmatism within +-10 waves
+#: reached 6.3); see ``BALANCED_GRID``.
+CHECKED_CANCELLATION = 7.0
 #: The largest peak signal-to-noise ratio ``max S_x / S_n`` over the band at which the
 #: presets' polar grids were checked to 1e-4 (a noise variance of about 8e-5 under
 #: ``MarkovSignal(1, 5)``, whose ``S_x(0)`` is 157; the bank's lowest noise, 1e-4, is
@@ -265,11 +275,36 @@ DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
 #: their worst error (2.5e-8 with that rule), at about 1.8x the tier's value time.
 STEEP_SLOPE = 35.0
 
+#: The grid of the default's balanced tier, taken by designs off the axis whose terms
+#: cancel (``BALANCED_CANCELLATION``), whatever their strength or slope. The tiers by
+#: strength fall short on them for want of several counts at once (on four designs,
+#: doubling one count at a time helped one each): the OTF ripples more finely along the
+#: rays than the slope says (radial OTF nodes), the phase difference varies along the
+#: overlap chords (the overlap rule), and where such a design's OTF nearly vanishes on rings
+#: the peaks of ``S_e`` need the closed-form integration of ``jmse_jax._ridges``
+#: (``peaks``). Chosen on the 64 designs of ``benchmarks/balanced_polar.py`` that the tiers
+#: had more than 1e-4 off (``benchmarks/balanced_tier.py``, session 64): (128, 64) / (9600,
+#: 256) / (96, 96) floor 96 left 8 of them off without peaks and 2 with them (9.5e-4 at u =
+#: 0.2, slope 53; 1.2e-4 at u = 1) whatever the overlap rule ((128, 128)) or the fine
+#: counts ((14400, 256), (9600, 384)); 160 radial OTF nodes brought all 64 within 2.6e-5
+#: (192: 4.6e-5; 192 with the overlap rule (80, 80) or (64, 64): 1.2e-3 and 5.7e-2 off), and
+#: so did 48 angular OTF nodes and 4800 fine radial ones, which keep the reverse pass's
+#: scratch at the other tiers' (23.4 MB; with (160, 64) / (9600, 256) it was 60 MB and the
+#: Fig. 1 point's value_and_grad 2.2x slower, as every design pays for the largest branch's
+#: scratch, ``_tier_plans``); without peaks that grid left 21 off (4.6e-3). On every stored
+#: design that cancels (the 334 of the balanced family and the tier calibrations), on
+#: astigmatism at the medial focus, on three-term mixtures and on the balanced family up to
+#: its largest cancellation (7.0), see ``benchmarks/README.md``. About 0.3 s per design
+#: (value; tier 3: 0.05 s); the closed-form peaks add about 4 s to the compile of the
+#: default's jitted value and value_and_grad (12 -> 16 s and 27 -> 32 s).
+BALANCED_GRID = dict(nodes=(160, 48), se_nodes=(4800, 256), overlap_nodes=(96, 96),
+                     overlap_floor=96, peaks=True)
+
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
                  "overlap_floor")
 #: Preset entries that are not ``jmse`` keywords.
-_PRESET_ONLY = ("tiers", "radial")
+_PRESET_ONLY = ("tiers", "radial", "balanced")
 
 #: Named accuracy/speed settings of ``jmse``. ``nodes`` are OTF nodes per polar triangle
 #: (radial, angular), ``se_nodes`` the finer nodes on which the OTF is interpolated and
@@ -293,12 +328,12 @@ PRESETS: dict[str, dict] = {
     "fast": dict(
         quadrature="polar", nodes=(24, 16), se_nodes=(400, 120), otf_method="overlap",
         overlap_nodes=(28, 16), tiers=None, radial=True,
-        overlap_floor=OVERLAP_FLOOR, peaks=False,
+        overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=None,
     ),
     "default": dict(
         quadrature="polar", nodes=(40, 20), se_nodes=(2400, 160), otf_method="overlap",
         overlap_nodes=(28, 24), tiers=DEFAULT_TIERS, radial=True,
-        overlap_floor=OVERLAP_FLOOR, peaks=False,
+        overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=BALANCED_GRID,
     ),
     # 80 radial OTF nodes for H's (1 - r)^(3/2) edge on bands that reach the cutoff, 2800
     # radial S_e nodes for the ridges along the OTF's zeros at high SNR; each count differs
@@ -307,7 +342,7 @@ PRESETS: dict[str, dict] = {
     "high": dict(
         quadrature="polar", nodes=(80, 40), se_nodes=(2800, 960), otf_method="overlap",
         overlap_nodes=(48, 48), tiers=None, radial=True,
-        overlap_floor=OVERLAP_FLOOR, peaks=True,
+        overlap_floor=OVERLAP_FLOOR, peaks=True, balanced=None,
     ),
 }
 
@@ -326,6 +361,7 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
             if key in _GRID_OPTIONS:
                 options["tiers"] = None
                 options["radial"] = False
+                options["balanced"] = None
     check_choice("quadrature", options["quadrature"], QUADRATURES)
     check_choice("otf_method", options["otf_method"], OTF_METHODS)
     check_count("B", options["B"])
@@ -1571,7 +1607,9 @@ def _prepare(arguments, options):
     options = dict(options)
     tiers = options.pop("tiers")
     radial = options.pop("radial") and _radial_applies(options, signal, noise)
-    return _Static((options, tiers, radial, dtype)), inputs
+    balanced = options.pop("balanced") if tiers is not None else None
+    options.pop("balanced", None)
+    return _Static((options, tiers, radial, dtype, balanced)), inputs
 
 
 def _route(aberrations, field, u, signal, noise, **options):
@@ -1586,19 +1624,43 @@ def _route(aberrations, field, u, signal, noise, **options):
 
 
 def _base_plans(static):
-    """The plans of ``static``: the tiers' (or the one fixed grid)."""
-    options, tiers, _, _ = static.value
+    """The plans of ``static``: the tiers' (or the one fixed grid), then the balanced
+    tier's when there is one (``BALANCED_GRID``)."""
+    options, tiers, _, _, balanced = static.value
     if tiers is None:
         return ((options, None),)
-    return _tier_plans(options, tiers)
+    plans = _tier_plans(options, tiers)
+    if balanced is not None:
+        plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
+    return plans
+
+
+def _tier_plans_of(static, plans):
+    """The plans of ``_base_plans`` that are tiers by strength (the balanced tier's is not:
+    the one-ray plans are drawn from the tiers alone)."""
+    return plans[:len(plans) - (static.value[4] is not None)]
 
 
 def _tier_of(static, aberrations, field, u):
-    """Index of the tier (of ``_base_plans``) this design takes (traceable)."""
+    """``(index, tier)``: the plan (of ``_base_plans``) this design takes, and its tier by
+    ``aberration_strength`` alone (``_tier_index``), which picks its one-ray plan (both
+    traceable). A design whose terms cancel (``_balancing``) takes the balanced tier."""
     tiers = static.value[1]
     if tiers is None:
-        return jnp.zeros((), jnp.int32)
-    return _tier_index(_strength(aberrations, field, u), jax.lax.stop_gradient(u), tiers)
+        zero = jnp.zeros((), jnp.int32)
+        return zero, zero
+    strength = _strength(aberrations, field, u)
+    tier = _tier_index(strength, jax.lax.stop_gradient(u), tiers)
+    if static.value[4] is None:
+        return tier, tier
+    balancing = _balancing(strength, _cancellation(aberrations, field, u))
+    return jnp.where(balancing, len(tiers), tier).astype(jnp.int32), tier
+
+
+def _balancing(strength, cancellation):
+    """Whether a design of this ``aberration_strength`` and ``_cancellation`` takes the
+    default's balanced tier (``BALANCED_CANCELLATION``; arrays or scalars, traceable)."""
+    return (strength >= CANCELLING_STRENGTH) & (cancellation >= BALANCED_CANCELLATION)
 
 
 def _plans_and_index(static, aberrations, field, u):
@@ -1612,14 +1674,15 @@ def _plans_and_index(static, aberrations, field, u):
     rule then takes the gradient from the design's own tier (``_switched_merit_jvp``).
     """
     plans = _base_plans(static)
-    index = tier = _tier_of(static, aberrations, field, u)
+    index, by_strength = _tier_of(static, aberrations, field, u)
+    tier = index
     # A rotationally symmetric design (any design on the axis) is integrated along one ray:
     # more plans in the same switch (``_radial_plans``).
     symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
     n_base = None
     if symmetric is not False:
-        radial_plans, split = _radial_plans(plans)
-        group = (index >= split).astype(jnp.int32) if len(radial_plans) > 1 else 0
+        radial_plans, split = _radial_plans(_tier_plans_of(static, plans))
+        group = (by_strength >= split).astype(jnp.int32) if len(radial_plans) > 1 else 0
         if symmetric is True:
             plans, index = radial_plans, group + jnp.zeros((), jnp.int32)
         else:
@@ -1655,11 +1718,13 @@ def _traced_merit(static, inputs):
 
 @functools.partial(jax.jit, static_argnums=0)
 def _concrete_choice(static, aberrations, field, u):
-    """Tier index and radial symmetry (False if no one-ray plan applies) of a design."""
+    """``(plan index, tier by strength, radial symmetry, strength, cancellation)`` of a
+    design (``_tier_of``; symmetry False if no one-ray plan applies)."""
     aberrations = aberrations.without_tilt()
     symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
-    return (_tier_of(static, aberrations, field, u), jnp.asarray(symmetric),
-            _strength(aberrations, field, u))
+    index, by_strength = _tier_of(static, aberrations, field, u)
+    return (index, by_strength, jnp.asarray(symmetric), _strength(aberrations, field, u),
+            _cancellation(aberrations, field, u))
 
 
 @jax.jit
@@ -1724,29 +1789,43 @@ def _slope_message(which: str) -> str:
             f"overlap_nodes and overlap_floor in particular (see jmse's docstring)")
 
 
-def _cancellation_message(which: str) -> str:
+def _cancellation_message(which: str, balanced: bool) -> str:
     """The warning for a design (or designs: ``which``) whose terms cancel each other's slope
-    (``CHECKED_CANCELLATION``); the command line gives it too."""
-    return (f"the terms of the design cancel much of each other's wavefront slope: their "
-            f"aberration_strength taken one by one sums to {which} times the design's "
-            f"(checked to {CHECKED_CANCELLATION:g} from a strength of "
-            f"{CANCELLING_STRENGTH:g}). The default's tiers were calibrated on random designs "
-            f"and measured up to 8e-2 off on defocus set against spherical aberration off the "
-            f"axis (benchmarks/balanced_polar.py; on the axis the one-ray plans hold): compare "
-            f"two grids of your own, finer in every count (nodes, se_nodes, overlap_nodes, "
-            f"overlap_floor; see jmse's docstring)")
+    beyond what its preset was checked at: ``BALANCED_CANCELLATION`` for a preset without
+    the balanced tier, ``CHECKED_CANCELLATION`` with it (``balanced``); the command line
+    gives it too."""
+    start = (f"the terms of the design cancel much of each other's wavefront slope: their "
+             f"aberration_strength taken one by one sums to {which} times the design's")
+    if balanced:
+        return (f"{start}, beyond what the default's balanced tier was checked at "
+                f"({CHECKED_CANCELLATION:g}; defocus set against spherical aberration reaches "
+                f"7 at most): the JMSE may be off. Compare two grids of your own, finer in "
+                f"every count than BALANCED_GRID (nodes, se_nodes, overlap_nodes, "
+                f"overlap_floor; see jmse's docstring)")
+    return (f"{start} (from {BALANCED_CANCELLATION:g} at a strength of "
+            f"{CANCELLING_STRENGTH:g} the default takes its balanced tier). Grids calibrated "
+            f"on random designs were measured far off on defocus set against spherical "
+            f"aberration off the axis ('high' up to 2.6e-1, the default's tiers by strength "
+            f"8e-2; benchmarks/balanced_polar.py; on the axis the one-ray plans hold): use "
+            f"preset='default', or compare two grids of your own, finer in every count "
+            f"(nodes, se_nodes, overlap_nodes, overlap_floor; see jmse's docstring)")
 
 
-def _beyond_checked(strength, u, symmetric, cancellation=1.0):
+def _beyond_checked(strength, u, symmetric, cancellation=1.0, balanced=False):
     """``(strength beyond, slope beyond, cancelling beyond, slope)`` for designs (arrays or
     scalars) of the given ``aberration_strength``, ``u``, symmetry and ``_cancellation``
-    (each design gets at most one of the three)."""
+    (each design gets at most one of the three); ``balanced``: the preset has the balanced
+    tier (checked to ``CHECKED_CANCELLATION``), else designs that would take it are beyond
+    (from ``BALANCED_CANCELLATION``)."""
     strength, u, symmetric = np.asarray(strength), np.asarray(u), np.asarray(symmetric, bool)
     slope = strength / np.asarray(_band_reach(u), strength.dtype)
     strong = strength > np.where(symmetric, CHECKED_STRENGTH_ONE_RAY, CHECKED_STRENGTH)
     steep = ~strong & (slope > CHECKED_SLOPE)
-    cancelling = (~strong & ~steep & ~symmetric & (strength >= CANCELLING_STRENGTH)
-                  & (np.asarray(cancellation) >= CHECKED_CANCELLATION))
+    cancellation = np.asarray(cancellation)
+    # With the balanced tier: beyond its checked bound, to rounding (r = -2/3 gives 7 + 3e-15).
+    beyond = (cancellation > CHECKED_CANCELLATION * (1.0 + 1e-9) if balanced
+              else _balancing(strength, cancellation))
+    cancelling = ~strong & ~steep & ~symmetric & (strength >= CANCELLING_STRENGTH) & beyond
     return strong, steep, cancelling, slope
 
 
@@ -1758,26 +1837,25 @@ def _concrete_merit(static, inputs, warn=False):
     (``CHECKED_STRENGTH``)."""
     dtype = static.value[3]
     plans = _base_plans(static)
-    index, symmetric, strength = _concrete_choice(static, *inputs[:3])
-    index, symmetric, strength = int(index), int(symmetric), float(strength)
-    # The cancellation only where it can matter (a small program of its own).
-    cancellation = (float(_cancellation_jit(*inputs[:3]))
-                    if warn and not symmetric and strength >= CANCELLING_STRENGTH else 1.0)
-    strong, steep, cancelling, slope = _beyond_checked(strength, float(inputs[2]), symmetric,
-                                                       cancellation)
+    index, by_strength, symmetric, strength, cancellation = (
+        x.item() for x in _concrete_choice(static, *inputs[:3]))
+    strong, steep, cancelling, slope = _beyond_checked(
+        strength, float(inputs[2]), symmetric, cancellation,
+        balanced=static.value[4] is not None)
     if warn and strong:
         warnings.warn(_strength_message(f"{strength:.3g}"), UserWarning, stacklevel=3)
     elif warn and steep:
         warnings.warn(_slope_message(f"{float(slope):.3g}"), UserWarning, stacklevel=3)
     elif warn and cancelling:
-        warnings.warn(_cancellation_message(f"{cancellation:.3g}"), UserWarning, stacklevel=3)
+        warnings.warn(_cancellation_message(f"{cancellation:.3g}", static.value[4] is not None),
+                      UserWarning, stacklevel=3)
     if warn:  # the one-ray plans integrate the peaks in closed form, as peaks=True does
         _warn_beyond_checked_snr(*inputs[2:], stacklevel=4,
                                  peaks=bool(symmetric) or static.value[0]["peaks"])
     plan = plans[index]
     if symmetric:
-        radial_plans, split = _radial_plans(plans)
-        plan = radial_plans[int(len(radial_plans) > 1 and index >= split)]
+        radial_plans, split = _radial_plans(_tier_plans_of(static, plans))
+        plan = radial_plans[int(len(radial_plans) > 1 and by_strength >= split)]
     value, path = _eager_tier_choice(plan, dtype, inputs)
     return value, index, bool(symmetric), path
 

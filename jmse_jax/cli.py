@@ -10,6 +10,7 @@ here (the library itself never does so at import). Bad arguments give a one-line
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -180,9 +181,10 @@ def _beyond_message(message, value: float, beyond: int = 1, n: int = 1) -> str:
 def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int = 1024) -> list:
     """The warnings ``jmse`` gives a concrete design, for designs that run under ``jit`` (where
     it cannot give them): ``aberration_strength`` beyond ``CHECKED_STRENGTH``, the wavefront
-    slope beyond ``CHECKED_SLOPE``, terms that cancel beyond ``CHECKED_CANCELLATION``, and
-    peak ``S_x / S_n`` beyond ``CHECKED_SNR``. Leaves of
-    shape (n,), one design per row; the strength and symmetry of each come from the
+    slope beyond ``CHECKED_SLOPE``, terms that cancel beyond what the preset was checked at
+    (``BALANCED_CANCELLATION``, or ``CHECKED_CANCELLATION`` with the default's balanced
+    tier), and peak ``S_x / S_n`` beyond ``CHECKED_SNR``. Leaves of shape (n,), one design
+    per row; the strength and symmetry of each come from the
     library's own choice of plan (``_concrete_choice``), the bounds from ``_beyond_checked``,
     the noise check is the library's (``_warn_beyond_checked_snr``). Each warning goes to
     stderr as one line; returns their texts."""
@@ -193,7 +195,6 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
 
     from ._merit import (
         _beyond_checked,
-        _cancellation,
         _cancellation_message,
         _concrete_choice,
         _prepare,
@@ -209,8 +210,8 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
                          jmse_options(preset))
 
     def _choice(*design):
-        _, sym, st = _concrete_choice(static, *design)
-        return sym, st, _cancellation(*design)
+        _, _, sym, st, cancel = _concrete_choice(static, *design)
+        return sym, st, cancel
 
     choice = jax.jit(jax.vmap(_choice))
     size = min(n, chunk)
@@ -224,13 +225,15 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
         cancellation.append(np.asarray(cancel)[: n - start])
     symmetric, strength = np.concatenate(symmetric), np.concatenate(strength)
     cancellation = np.concatenate(cancellation)
+    balanced = static.value[4] is not None
     strong, steep, cancelling, slope = _beyond_checked(strength, np.asarray(u), symmetric,
-                                                       cancellation)
+                                                       cancellation, balanced=balanced)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
+        cancelling_message = functools.partial(_cancellation_message, balanced=balanced)
         for message, beyond, values in ((_strength_message, strong, strength),
                                         (_slope_message, steep, slope),
-                                        (_cancellation_message, cancelling, cancellation)):
+                                        (cancelling_message, cancelling, cancellation)):
             if beyond.any():
                 warnings.warn(_beyond_message(message, float(values[beyond].max()),
                                               int(beyond.sum()), n), UserWarning, stacklevel=2)

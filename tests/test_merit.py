@@ -536,31 +536,59 @@ def test_cancellation_of_terms_against_the_analytic_slopes():
     assert medial == pytest.approx(3.0, rel=1e-9)
 
 
-def test_terms_that_cancel_warn_off_the_axis():
+def test_terms_that_cancel_warn_off_the_axis_without_the_balanced_tier():
     """Defocus set against spherical aberration a hair off the axis (``W = 10 rho^2 - 7
-    rho^4``, cancellation 6, strength 5.7): such designs were up to 8e-2 off in the polar
-    tiers (benchmarks/balanced_polar.py), so a concrete call warns. The same design on the
-    axis (its one-ray plan holds), pure spherical aberration of that strength, defocus set
-    against field curvature (one shape), the Fig. 1 point (cancellation 1.1)
-    and grids of the caller's own give no warning."""
+    rho^4``, cancellation 6, strength 5.7): such designs were up to 8e-2 off in the default's
+    tiers by strength and 2.6e-1 in ``"high"`` (benchmarks/balanced_polar.py). The default
+    takes its balanced tier (``test_radial``), silently; ``"fast"`` and ``"high"``, which
+    have none, warn, and so does astigmatism at the medial focus (cancellation 3, strength
+    14; 8.7e-3 off in the default's tier 3). The same design on the axis (its one-ray plan
+    holds), pure spherical aberration of that strength, defocus set against field curvature
+    (one shape), the Fig. 1 point (cancellation 1.1) and grids of the caller's own give no
+    warning."""
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
     design = dict(w020=10.0, w040=-7.0)
-    with pytest.warns(UserWarning, match=r"the terms of the design cancel much of each "
-                                         r"other's wavefront slope: their aberration_strength "
-                                         r"taken one by one sums to 6 times"):
-        jj.jmse(jj.Seidel(**design, w222=1e-7), 1.0, 0.5, signal, noise)
-    # Astigmatism at the medial focus (cancellation 3, strength 14) was 8.7e-3 off.
+    for preset in ("fast", "high"):
+        with pytest.warns(UserWarning, match=r"the terms of the design cancel much of each "
+                                             r"other's wavefront slope: their "
+                                             r"aberration_strength taken one by one sums to 6 "
+                                             r"times the design's \(from 2.5 at a strength of "
+                                             r"2.5 the default takes its balanced tier\)"):
+            jj.jmse(jj.Seidel(**design, w222=1e-7), 1.0, 0.5, signal, noise, preset=preset)
     with pytest.warns(UserWarning, match=r"sums to 3 times"):
         jj.jmse(jj.Seidel(w020=-10.0, w222=20.0), 1.0, 0.5, signal, noise, preset="fast")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        jj.jmse(jj.Seidel(**design), 1.0, 0.5, signal, noise)
+        jj.jmse(jj.Seidel(**design), 1.0, 0.5, signal, noise, preset="fast")
         jj.jmse(jj.Seidel(w040=1.5, w222=1e-7), 1.0, 0.5, signal, noise, preset="fast")
         jj.jmse(jj.Seidel(w020=10.0, w220=-8.0, w222=1e-7), 1.0, 0.5, signal, noise,
                 preset="fast")
         jj.jmse(jj.Seidel(**FIG1_COEFFICIENTS), 0.95, 0.2, signal, noise, preset="fast")
         jj.jmse(jj.Seidel(**design, w222=1e-7), 1.0, 0.5, signal, noise, nodes=(16, 8),
                 se_nodes=(64, 16), overlap_nodes=(12, 12))
+
+
+def test_cancellation_bounds_of_the_warning():
+    """Which cancelling designs warn (``_beyond_checked``): with the default's balanced tier,
+    those beyond ``CHECKED_CANCELLATION`` (7, the most defocus and spherical aberration reach,
+    at r = -2/3, where the sampled value is 7 to rounding), without it every design that
+    would take it (from ``BALANCED_CANCELLATION`` at ``CANCELLING_STRENGTH``); never on
+    the axis, below the strength, or when a strength or slope warning is given instead."""
+    from jmse_jax._merit import _beyond_checked, _cancellation_jit
+
+    at_most = float(_cancellation_jit(jj.Seidel(w020=30.0, w040=-20.0), 1.0, 0.5))
+    assert at_most == pytest.approx(7.0, rel=1e-12)
+
+    def cancelling(strength, cancellation, balanced, symmetric=False, u=0.5):
+        return bool(_beyond_checked(strength, u, symmetric, cancellation, balanced)[2])
+
+    assert not cancelling(10.0, at_most, True) and cancelling(10.0, 7.5, True)
+    assert not cancelling(10.0, 2.5, True)
+    assert cancelling(10.0, 2.5, False) and not cancelling(10.0, 2.49, False)
+    assert not cancelling(2.4, 7.5, False) and not cancelling(2.4, 7.5, True)
+    assert not cancelling(10.0, 7.5, True, symmetric=True)
+    assert not cancelling(30.0, 7.5, True)  # beyond CHECKED_STRENGTH: that warning instead
+    assert not cancelling(10.0, 7.5, True, u=0.1)  # slope 71: the slope warning instead
 
 
 def test_many_waves_at_small_u_take_the_last_tier_and_warn_beyond_it():

@@ -157,6 +157,26 @@ def test_balanced_spherical_on_the_axis(w020, u, group):
     assert abs(bare / expected - 1.0) > 1e-3
 
 
+def test_balanced_spherical_off_the_axis_takes_the_balanced_tier():
+    """``W = c (rho^2 - 0.7 rho^4)`` a hair off the axis (1e-7 waves of astigmatism at field
+    1, which moves the JMSE by about 1e-8): its terms cancel (cancellation 6), so the default
+    takes the balanced tier (``BALANCED_GRID``) without a warning, within 2e-5 of the
+    symmetric design's converged ray, where its tier by strength (tier 2) alone was 8e-2
+    off (``benchmarks/balanced_polar.py``)."""
+    symmetric = jj.Seidel(w020=33.1, w040=-23.17)
+    ab, u, noise = jj.Seidel(w020=33.1, w040=-23.17, w222=1e-7), 0.4, jj.WhiteNoise(1e-4)
+    strength = float(jj.aberration_strength(ab, 1.0, u))
+    assert int(_tier_index(strength, u, jj.DEFAULT_TIERS)) == 2
+    expected = _one_ray(symmetric, 0.0, u, noise=noise, **BALANCED_REFERENCE)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        route = _merit._route(ab, 1.0, u, SIGNAL, noise)
+    assert route["tier"] == len(jj.DEFAULT_TIERS) and not route["one_ray"]
+    assert float(route["value"]) == pytest.approx(expected, rel=2e-5)
+    tier2 = float(jj.jmse(ab, 1.0, u, SIGNAL, noise, **jj.DEFAULT_TIERS[2][2]))
+    assert abs(tier2 / expected - 1.0) > 1e-2
+
+
 #: On-axis JMSE at high SNR as a 1-D adaptive integral (``scipy.integrate.quad``, relative
 #: tolerance 1e-11, breakpoints at the OTF's zeros, the OTF at an overlap rule of (96, 96);
 #: ``benchmarks/low_noise.py``, ``results/low_noise.json``): (Seidel coefficients, u,
