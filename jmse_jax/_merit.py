@@ -291,14 +291,26 @@ STEEP_SLOPE = 35.0
 #: so did 48 angular OTF nodes and 4800 fine radial ones, which keep the reverse pass's
 #: scratch at the other tiers' (23.4 MB; with (160, 64) / (9600, 256) it was 60 MB and the
 #: Fig. 1 point's value_and_grad 2.2x slower, as every design pays for the largest branch's
-#: scratch, ``_tier_plans``); without peaks that grid left 21 off (4.6e-3). On every stored
-#: design that cancels (the 334 of the balanced family and the tier calibrations), on
-#: astigmatism at the medial focus, on three-term mixtures and on the balanced family up to
-#: its largest cancellation (7.0), see ``benchmarks/README.md``. About 0.3 s per design
-#: (value; tier 3: 0.05 s); the closed-form peaks add about 4 s to the compile of the
-#: default's jitted value and value_and_grad (12 -> 16 s and 27 -> 32 s).
+#: scratch, ``_tier_plans``); without peaks that grid left 21 off (4.6e-3). The overlap
+#: rule's floor on the inner panels (``_polar_otf``) was then lowered from 96 to 64: on the
+#: 64 the same errors at 0.18-0.21 s a design instead of 0.30 s (floor 48 held them too but
+#: left one design of r = -2/3 9.4e-5 off, where 64 and 96 give 3e-6; floor 24 left one of
+#: the 64 2.2e-4 off; (96, 80) floor 32 one 2.4e-3; (96, 64) floor 64 one 2.8e-3; 32
+#: angular OTF nodes one 1.5e-4). On every stored design that cancels (334 of the balanced
+#: family and the tier calibrations), 36 of astigmatism at the medial focus, 36 three-term
+#: mixtures and 82 more of the balanced family up to its largest cancellation (7.0 at
+#: r = -2/3), 488 in all, the default (as a user calls it) is within 4.9e-5 of
+#: converged references (``results/balanced_tier.md``; the tiers by strength left 66 of the
+#: 370 stored and medial-focus ones more than 1e-4 off, worst 8.1e-2). A value takes about
+#: 0.2 s (2 cores; median over those 64 designs), and the closed-form peaks add a few
+#: seconds to the compile of the default's jitted value and value_and_grad (2 cores, fresh
+#: processes: 10-13 -> 13-16 s and 22-29 -> 29-35 s). The bound also sends designs that
+#: the tiers by strength held to this grid: 33 of the calibration's 426 random designs and
+#: two of the bank's off-axis cases
+#: (``kink_u0.85_shortcut``, 4.5e-7 off in tier 1, and ``kink_u0.8_strong``, 7.9e-8 in tier
+#: 3), which now cost 0.43 s instead of 9 and 42 ms (a value, concrete call).
 BALANCED_GRID = dict(nodes=(160, 48), se_nodes=(4800, 256), overlap_nodes=(96, 96),
-                     overlap_floor=96, peaks=True)
+                     overlap_floor=64, peaks=True)
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
@@ -1442,7 +1454,10 @@ def jmse(
         (relative error <= 1e-4 on the package's aberration bank, see the README). It is
         adaptive: the grid is chosen from ``aberration_strength`` (``DEFAULT_TIERS``), coarse
         for nearly diffraction-limited designs and finer for strongly aberrated ones, with
-        ``lax.switch`` under ``jit`` (one tier runs). The two weakest tiers first try a
+        ``lax.switch`` under ``jit`` (one tier runs); a design off the axis whose terms
+        cancel each other's slope (defocus set against spherical aberration, say;
+        ``BALANCED_CANCELLATION``) takes a balanced tier of its own (``BALANCED_GRID``,
+        about 0.3 s a value). The two weakest tiers first try a
         cheaper grid and keep its value when a coarse check grid (computed in float32)
         agrees with it to 1e-5 and its own interpolation-error estimate is below 1e-5
         (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the band reaches
@@ -1653,7 +1668,10 @@ def _tier_of(static, aberrations, field, u):
     tier = _tier_index(strength, jax.lax.stop_gradient(u), tiers)
     if static.value[4] is None:
         return tier, tier
-    balancing = _balancing(strength, _cancellation(aberrations, field, u))
+    # The cancellation only where it can matter (most designs are weaker than that).
+    cancellation = jax.lax.cond(strength >= CANCELLING_STRENGTH, _cancellation,
+                                lambda *_: jnp.ones((), strength.dtype), aberrations, field, u)
+    balancing = _balancing(strength, cancellation)
     return jnp.where(balancing, len(tiers), tier).astype(jnp.int32), tier
 
 
