@@ -1669,8 +1669,10 @@ def _tier_of(static, aberrations, field, u):
     if static.value[4] is None:
         return tier, tier
     # The cancellation only where it can matter (most designs are weaker than that).
-    cancellation = jax.lax.cond(strength >= CANCELLING_STRENGTH, _cancellation,
-                                lambda *_: jnp.ones((), strength.dtype), aberrations, field, u)
+    cancellation = jax.lax.cond(
+        strength >= CANCELLING_STRENGTH,
+        lambda *a: _cancellation(*a).astype(strength.dtype),
+        lambda *_: jnp.ones((), strength.dtype), aberrations, field, u)
     balancing = _balancing(strength, cancellation)
     return jnp.where(balancing, len(tiers), tier).astype(jnp.int32), tier
 

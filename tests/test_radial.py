@@ -177,6 +177,24 @@ def test_balanced_spherical_off_the_axis_takes_the_balanced_tier():
     assert abs(tier2 / expected - 1.0) > 1e-2
 
 
+@pytest.mark.slow
+def test_balanced_tier_gradient_against_finite_differences():
+    """The balanced tier's gradient (jitted ``value_and_grad`` of the default, which routes
+    the design there) against central differences of its own concrete values, in w020,
+    w040 and the astigmatism, and its value against the concrete call's."""
+    ab, u, noise = jj.Seidel(w020=33.1, w040=-23.17, w222=0.3), 0.4, jj.WhiteNoise(1e-4)
+    assert _merit._route(ab, 1.0, u, SIGNAL, noise)["tier"] == len(jj.DEFAULT_TIERS)
+    value, grad = jax.jit(jax.value_and_grad(jj.jmse))(ab, 1.0, u, SIGNAL, noise)
+    assert float(value) == pytest.approx(float(jj.jmse(ab, 1.0, u, SIGNAL, noise)), rel=1e-12)
+    h = 1e-4
+    for name in ("w020", "w040", "w222"):
+        plus = jj.Seidel(**{**ab.__dict__, name: getattr(ab, name) + h})
+        minus = jj.Seidel(**{**ab.__dict__, name: getattr(ab, name) - h})
+        fd = (float(jj.jmse(plus, 1.0, u, SIGNAL, noise))
+              - float(jj.jmse(minus, 1.0, u, SIGNAL, noise))) / (2 * h)
+        assert float(getattr(grad, name)) == pytest.approx(fd, rel=1e-5, abs=1e-9), name
+
+
 #: On-axis JMSE at high SNR as a 1-D adaptive integral (``scipy.integrate.quad``, relative
 #: tolerance 1e-11, breakpoints at the OTF's zeros, the OTF at an overlap rule of (96, 96);
 #: ``benchmarks/low_noise.py``, ``results/low_noise.json``): (Seidel coefficients, u,
