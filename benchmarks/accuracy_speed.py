@@ -262,8 +262,11 @@ def default_by_tier(cases) -> dict:
         strength = float(jj.aberration_strength(ab, field, u))
         route = _route(*case.arguments)
         tier = route["tier"]
-        _, _, grid, shortcut = jj.DEFAULT_TIERS[tier]
-        group = str(tier)
+        if tier == len(jj.DEFAULT_TIERS):  # the balanced tier (terms that cancel)
+            grid, shortcut, group = jj.BALANCED_GRID, None, f"{tier} (balanced)"
+        else:
+            _, _, grid, shortcut = jj.DEFAULT_TIERS[tier]
+            group = str(tier)
         if route["one_ray"]:
             last = split - 1 if tier < split else len(jj.DEFAULT_TIERS) - 1
             first = 0 if tier < split else split

@@ -1629,7 +1629,8 @@ def _prepare(arguments, options):
 
 def _route(aberrations, field, u, signal, noise, **options):
     """Which plan ``jmse`` (with these options) takes for a concrete design, as a dict:
-    ``tier`` (index into the tiers, None without tiers), ``one_ray`` (a one-ray plan runs,
+    ``tier`` (index into the tiers, ``len(DEFAULT_TIERS)`` for the balanced tier, the tier
+    by strength when a one-ray plan runs; None without tiers), ``one_ray`` (a one-ray plan runs,
     ``jmse_jax._radial``) and ``path`` (the shortcut's ``"first"`` or ``"trial"`` grid, or
     the plan's own ``"grid"``); and the ``value`` it returns. For the benchmarks."""
     static, inputs = _prepare((aberrations, field, u, signal, noise), jmse_options(**options))
@@ -1852,7 +1853,8 @@ def _beyond_checked(strength, u, symmetric, cancellation=1.0, balanced=False):
 def _concrete_merit(static, inputs, warn=False):
     """``jmse`` after validation, for concrete inputs: the plan this design takes is chosen
     first, and only the grids it needs are compiled (each once per process) and run.
-    Returns ``(value, tier index, one-ray plan taken, path)`` (``_eager_tier_choice``);
+    Returns ``(value, plan index, one-ray plan taken, path)`` (``_eager_tier_choice``; the
+    index is the tier by strength when a one-ray plan is taken, since it picks that plan);
     ``warn``: a ``UserWarning`` when the design is stronger than the presets were checked at
     (``CHECKED_STRENGTH``)."""
     dtype = static.value[3]
@@ -1877,7 +1879,8 @@ def _concrete_merit(static, inputs, warn=False):
         radial_plans, split = _radial_plans(_tier_plans_of(static, plans))
         plan = radial_plans[int(len(radial_plans) > 1 and by_strength >= split)]
     value, path = _eager_tier_choice(plan, dtype, inputs)
-    return value, index, bool(symmetric), path
+    # A one-ray plan is drawn from the tiers by strength (not the balanced tier).
+    return value, by_strength if symmetric else index, bool(symmetric), path
 
 
 #: ``baseline_jmse`` warns below this many lags ``1 / B`` per half-band ``u`` (``u * B``):
