@@ -1457,7 +1457,7 @@ def jmse(
         ``lax.switch`` under ``jit`` (one tier runs); a design off the axis whose terms
         cancel each other's slope (defocus set against spherical aberration, say;
         ``BALANCED_CANCELLATION``) takes a balanced tier of its own (``BALANCED_GRID``,
-        about 0.3 s a value). The two weakest tiers first try a
+        about 0.2 s a value). The two weakest tiers first try a
         cheaper grid and keep its value when a coarse check grid (computed in float32)
         agrees with it to 1e-5 and its own interpolation-error estimate is below 1e-5
         (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the band reaches
