@@ -1622,8 +1622,7 @@ def _prepare(arguments, options):
     options = dict(options)
     tiers = options.pop("tiers")
     radial = options.pop("radial") and _radial_applies(options, signal, noise)
-    balanced = options.pop("balanced") if tiers is not None else None
-    options.pop("balanced", None)
+    balanced = options.pop("balanced")  # None with a fixed grid (``jmse_options``)
     return _Static((options, tiers, radial, dtype, balanced)), inputs
 
 
@@ -1657,25 +1656,31 @@ def _tier_plans_of(static, plans):
     return plans[:len(plans) - (static.value[4] is not None)]
 
 
-def _tier_of(static, aberrations, field, u):
-    """``(index, tier)``: the plan (of ``_base_plans``) this design takes, and its tier by
-    ``aberration_strength`` alone (``_tier_index``), which picks its one-ray plan (both
-    traceable). A design whose terms cancel (``_balancing``) takes the balanced tier."""
-    tiers = static.value[1]
-    if tiers is None:
-        zero = jnp.zeros((), jnp.int32)
-        return zero, zero
+def _tier_of(static, aberrations, field, u, cancelling=False):
+    """``(index, tier, cancellation)``: the plan (of ``_base_plans``) this design takes, its
+    tier by ``aberration_strength`` alone (``_tier_index``), which picks its one-ray plan,
+    and its ``_cancellation`` (all traceable). A design whose terms cancel (``_balancing``)
+    takes the balanced tier. The cancellation is computed only where it can matter, with
+    the balanced tier or ``cancelling`` (for the warnings) and from ``CANCELLING_STRENGTH``
+    (most designs are weaker than that); elsewhere it is 1."""
+    tiers, balanced = static.value[1], static.value[4]
+    zero = jnp.zeros((), jnp.int32)
+    if tiers is None and not cancelling:
+        return zero, zero, jnp.ones(())
     strength = _strength(aberrations, field, u)
+    cancellation = jnp.ones((), strength.dtype)
+    if balanced is not None or cancelling:
+        cancellation = jax.lax.cond(
+            strength >= CANCELLING_STRENGTH,
+            lambda *a: _cancellation(*a).astype(strength.dtype),
+            lambda *_: cancellation, aberrations, field, u)
+    if tiers is None:
+        return zero, zero, cancellation
     tier = _tier_index(strength, jax.lax.stop_gradient(u), tiers)
-    if static.value[4] is None:
-        return tier, tier
-    # The cancellation only where it can matter (most designs are weaker than that).
-    cancellation = jax.lax.cond(
-        strength >= CANCELLING_STRENGTH,
-        lambda *a: _cancellation(*a).astype(strength.dtype),
-        lambda *_: jnp.ones((), strength.dtype), aberrations, field, u)
-    balancing = _balancing(strength, cancellation)
-    return jnp.where(balancing, len(tiers), tier).astype(jnp.int32), tier
+    if balanced is None:
+        return tier, tier, cancellation
+    index = jnp.where(_balancing(strength, cancellation), len(tiers), tier)
+    return index.astype(jnp.int32), tier, cancellation
 
 
 def _balancing(strength, cancellation):
@@ -1695,7 +1700,7 @@ def _plans_and_index(static, aberrations, field, u):
     rule then takes the gradient from the design's own tier (``_switched_merit_jvp``).
     """
     plans = _base_plans(static)
-    index, by_strength = _tier_of(static, aberrations, field, u)
+    index, by_strength, _ = _tier_of(static, aberrations, field, u)
     tier = index
     # A rotationally symmetric design (any design on the axis) is integrated along one ray:
     # more plans in the same switch (``_radial_plans``).
@@ -1740,12 +1745,13 @@ def _traced_merit(static, inputs):
 @functools.partial(jax.jit, static_argnums=0)
 def _concrete_choice(static, aberrations, field, u):
     """``(plan index, tier by strength, radial symmetry, strength, cancellation)`` of a
-    design (``_tier_of``; symmetry False if no one-ray plan applies)."""
+    design (``_tier_of``; symmetry False if no one-ray plan applies; the cancellation 1
+    below ``CANCELLING_STRENGTH``, where no warning looks at it)."""
     aberrations = aberrations.without_tilt()
     symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
-    index, by_strength = _tier_of(static, aberrations, field, u)
+    index, by_strength, cancellation = _tier_of(static, aberrations, field, u, cancelling=True)
     return (index, by_strength, jnp.asarray(symmetric), _strength(aberrations, field, u),
-            _cancellation(aberrations, field, u))
+            cancellation)
 
 
 @jax.jit
