@@ -62,6 +62,7 @@ __all__ = [
     "CHECKED_CANCELLATION",
     "CHECKED_SLOPE",
     "CHECKED_STRENGTH",
+    "HIGH_BALANCED_GRID",
     "SEQUENTIAL_VMAP_BACKENDS",
     "STEEP_SLOPE",
     "U_MAX",
@@ -94,11 +95,12 @@ CHECKED_SLOPE = 65.0
 #: Terms that cancel each other's slope: a design off the axis whose ``cancellation`` (the
 #: ``aberration_strength`` of each of its terms alone, summed, over the design's own) is at
 #: least this, at a strength of at least ``CANCELLING_STRENGTH``, takes the default's
-#: balanced tier (``BALANCED_GRID``), and with a preset that has none (``"fast"``,
-#: ``"high"``) gets a ``UserWarning`` from a concrete ``jmse`` call (and from ``eval`` and
-#: ``sweep``). The tiers were calibrated on random designs, whose terms seldom cancel
-#: (median 1.3); defocus set against spherical aberration, as a designer balances them
-#: (``W = c (rho^2 + r rho^4)``, cancellation 2-7 for r in -1.5..-0.3), a hair off the axis
+#: balanced tier (``BALANCED_GRID``; ``"high"`` its ``HIGH_BALANCED_GRID``), and with the
+#: preset that has none (``"fast"``) gets a ``UserWarning`` from a concrete ``jmse`` call
+#: (and from ``eval`` and ``sweep``). The tiers were calibrated on random designs, whose
+#: terms seldom cancel (median 1.3); defocus set against spherical aberration, as a
+#: designer balances them (``W = c (rho^2 + r rho^4)``, cancellation 2-7 for r in
+#: -1.5..-0.3), a hair off the axis
 #: was measured up to 8e-2 off in those tiers at strength 15 and 3.5e-3 at strength 4
 #: (``benchmarks/balanced_polar.py``): 64 of 398 such designs more than 1e-4 off, all of
 #: cancellation 3.2 or more and strength 3 or more (none of r = -1, whose cancellation is
@@ -111,7 +113,7 @@ BALANCED_CANCELLATION = 2.5
 CANCELLING_STRENGTH = 2.5
 #: The largest ``cancellation`` at which the balanced tier was checked: a design beyond it
 #: (off the axis, of strength at least ``CANCELLING_STRENGTH``) gets a ``UserWarning`` from
-#: a concrete default ``jmse`` call (and from ``eval`` and ``sweep``). Defocus against
+#: a concrete default or ``"high"`` ``jmse`` call (and from ``eval`` and ``sweep``). Defocus against
 #: spherical aberration reaches 7.0 at ``r = -2/3``, the most for those two terms (3000
 #: random designs of defocus, spherical aberration, coma and astigmatism within +-10 waves
 #: reached 6.3); see ``BALANCED_GRID``.
@@ -311,6 +313,21 @@ STEEP_SLOPE = 35.0
 #: 3), which now cost 0.43 s instead of 9 and 42 ms (a value, concrete call).
 BALANCED_GRID = dict(nodes=(160, 48), se_nodes=(4800, 256), overlap_nodes=(96, 96),
                      overlap_floor=64, peaks=True)
+#: The balanced grid of the ``"high"`` preset, taken (as ``BALANCED_GRID`` in the default) by
+#: designs off the axis whose terms cancel (``BALANCED_CANCELLATION``). On the 488 designs
+#: of ``benchmarks/balanced_tier.py`` (session 65, ``results/balanced_high.md``) ``"high"``'s
+#: own grid left 91 more than 1e-4 off, worst 3.7e-1; this grid leaves none, worst 2.6e-5
+#: (3 more than 1e-5, 18 more than 1e-6: the balanced family at u = 1 and u = 0.2 at
+#: strength 15-25, where the own grid was far worse), and no design where the own grid was
+#: within 1e-6 is now more than 3 times its error; median 0.28 s a design (2 cores). It is
+#: ``BALANCED_GRID`` with ``"high"``'s 960 angular fine nodes: that grid's 256 left
+#: three-term mixtures 4.9e-5 off; (192, 64) / (9600, 512) / (128, 128) floor 96 left one
+#: design 4.6e-5 off at 0.79 s. Jitted ``"high"`` programs compile it as a second branch:
+#: at the Fig. 1 point the value's compile took 4.3-4.7 -> 7.1-8.6 s and value_and_grad's
+#: 8.1-9.7 -> 15.3-17.3 s, scratch 7.5 -> 15.1 MB (value; value_and_grad 47.7 MB either
+#: way), run time unchanged (about 34 / 75 ms).
+HIGH_BALANCED_GRID = dict(nodes=(160, 48), se_nodes=(4800, 960), overlap_nodes=(96, 96),
+                          overlap_floor=64, peaks=True)
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
@@ -331,6 +348,9 @@ _PRESET_ONLY = ("tiers", "radial", "balanced")
 #: at the minima of ``|H|^2`` along its rays in closed form (``jmse_jax._ridges``); on in
 #: ``"high"`` only, as it costs every program that holds a grid about 1.5 s of compile
 #: (3 s with a gradient) and doubles the time of a design that has such peaks.
+#: ``balanced``: the grid taken by designs off the axis whose terms cancel
+#: (``BALANCED_CANCELLATION``; ``BALANCED_GRID``, ``HIGH_BALANCED_GRID``); None in ``"fast"``
+#: and when a grid option is overridden.
 PRESETS: dict[str, dict] = {
     # 16 overlap nodes along the chords (20 until 2026-11-25): the same worst error on the
     # bank (3.1e-2) and on 40 random designs of the paper's singlet space against ``high``
@@ -354,7 +374,7 @@ PRESETS: dict[str, dict] = {
     "high": dict(
         quadrature="polar", nodes=(80, 40), se_nodes=(2800, 960), otf_method="overlap",
         overlap_nodes=(48, 48), tiers=None, radial=True,
-        overlap_floor=OVERLAP_FLOOR, peaks=True, balanced=None,
+        overlap_floor=OVERLAP_FLOOR, peaks=True, balanced=HIGH_BALANCED_GRID,
     ),
 }
 
@@ -1457,7 +1477,8 @@ def jmse(
         ``lax.switch`` under ``jit`` (one tier runs); a design off the axis whose terms
         cancel each other's slope (defocus set against spherical aberration, say;
         ``BALANCED_CANCELLATION``) takes a balanced tier of its own (``BALANCED_GRID``,
-        about 0.2 s a value). The two weakest tiers first try a
+        about 0.2 s a value; ``"high"`` has one too, ``HIGH_BALANCED_GRID``, about
+        0.3 s). The two weakest tiers first try a
         cheaper grid and keep its value when a coarse check grid (computed in float32)
         agrees with it to 1e-5 and its own interpolation-error estimate is below 1e-5
         (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the band reaches
@@ -1629,22 +1650,24 @@ def _prepare(arguments, options):
 def _route(aberrations, field, u, signal, noise, **options):
     """Which plan ``jmse`` (with these options) takes for a concrete design, as a dict:
     ``tier`` (index into the tiers, ``len(DEFAULT_TIERS)`` for the balanced tier, the tier
-    by strength when a one-ray plan runs; None without tiers), ``one_ray`` (a one-ray plan runs,
-    ``jmse_jax._radial``) and ``path`` (the shortcut's ``"first"`` or ``"trial"`` grid, or
-    the plan's own ``"grid"``); and the ``value`` it returns. For the benchmarks."""
+    by strength when a one-ray plan runs; None without tiers), ``balanced`` (the preset's
+    balanced grid runs: ``BALANCED_GRID``, ``HIGH_BALANCED_GRID``), ``one_ray`` (a one-ray
+    plan runs, ``jmse_jax._radial``) and ``path`` (the shortcut's ``"first"`` or ``"trial"``
+    grid, or the plan's own ``"grid"``); and the ``value`` it returns. For the benchmarks."""
     static, inputs = _prepare((aberrations, field, u, signal, noise), jmse_options(**options))
     value, index, symmetric, path = _concrete_merit(static, inputs)
-    tier = None if static.value[1] is None else index
-    return dict(tier=tier, one_ray=symmetric, path=path, value=value)
+    tiers, balanced = static.value[1], static.value[4]
+    takes_balanced = (balanced is not None and not symmetric
+                      and index == _n_strength_plans(tiers))
+    tier = None if tiers is None else index
+    return dict(tier=tier, balanced=takes_balanced, one_ray=symmetric, path=path, value=value)
 
 
 def _base_plans(static):
     """The plans of ``static``: the tiers' (or the one fixed grid), then the balanced
     tier's when there is one (``BALANCED_GRID``)."""
     options, tiers, _, _, balanced = static.value
-    if tiers is None:
-        return ((options, None),)
-    plans = _tier_plans(options, tiers)
+    plans = ((options, None),) if tiers is None else _tier_plans(options, tiers)
     if balanced is not None:
         plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
     return plans
@@ -1665,7 +1688,7 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
     (most designs are weaker than that); elsewhere it is 1."""
     tiers, balanced = static.value[1], static.value[4]
     zero = jnp.zeros((), jnp.int32)
-    if tiers is None and not cancelling:
+    if tiers is None and balanced is None and not cancelling:
         return zero, zero, jnp.ones(())
     strength = _strength(aberrations, field, u)
     cancellation = jnp.ones((), strength.dtype)
@@ -1674,13 +1697,18 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
             strength >= CANCELLING_STRENGTH,
             lambda *a: _cancellation(*a).astype(strength.dtype),
             lambda *_: cancellation, aberrations, field, u)
-    if tiers is None:
-        return zero, zero, cancellation
-    tier = _tier_index(strength, jax.lax.stop_gradient(u), tiers)
+    # Without tiers (``"high"``) the one fixed grid is plan 0 and the balanced grid plan 1.
+    tier = zero if tiers is None else _tier_index(strength, jax.lax.stop_gradient(u), tiers)
     if balanced is None:
         return tier, tier, cancellation
-    index = jnp.where(_balancing(strength, cancellation), len(tiers), tier)
+    index = jnp.where(_balancing(strength, cancellation), _n_strength_plans(tiers), tier)
     return index.astype(jnp.int32), tier, cancellation
+
+
+def _n_strength_plans(tiers):
+    """The number of plans by strength: the tiers', or the one fixed grid (``tiers`` None);
+    the balanced plan, where there is one, comes after them (``_base_plans``)."""
+    return 1 if tiers is None else len(tiers)
 
 
 def _balancing(strength, cancellation):
@@ -1824,18 +1852,19 @@ def _cancellation_message(which: str, balanced: bool) -> str:
     start = (f"the terms of the design cancel much of each other's wavefront slope: their "
              f"aberration_strength taken one by one sums to {which} times the design's")
     if balanced:
-        return (f"{start}, beyond what the default's balanced tier was checked at "
-                f"({CHECKED_CANCELLATION:g}; defocus set against spherical aberration reaches "
-                f"7 at most): the JMSE may be off. Compare two grids of your own, finer in "
-                f"every count than BALANCED_GRID (nodes, se_nodes, overlap_nodes, "
-                f"overlap_floor; see jmse's docstring)")
+        return (f"{start}, beyond what the balanced grids of the default and 'high' were "
+                f"checked at ({CHECKED_CANCELLATION:g}; defocus set against spherical "
+                f"aberration reaches 7 at most): the JMSE may be off. Compare two grids of "
+                f"your own, finer in every count than HIGH_BALANCED_GRID (nodes, se_nodes, "
+                f"overlap_nodes, overlap_floor; see jmse's docstring)")
     return (f"{start} (from {BALANCED_CANCELLATION:g} at a strength of "
-            f"{CANCELLING_STRENGTH:g} the default takes its balanced tier). Grids calibrated "
-            f"on random designs were measured far off on defocus set against spherical "
-            f"aberration off the axis ('high' up to 2.6e-1, the default's tiers by strength "
-            f"8e-2; benchmarks/balanced_polar.py; on the axis the one-ray plans hold): use "
-            f"preset='default', or compare two grids of your own, finer in every count "
-            f"(nodes, se_nodes, overlap_nodes, overlap_floor; see jmse's docstring)")
+            f"{CANCELLING_STRENGTH:g} the default and 'high' take a balanced grid). Grids "
+            f"calibrated on random designs were measured far off on defocus set against "
+            f"spherical aberration off the axis (up to 2.6e-1 with 'high''s own grid, 8e-2 with "
+            f"the default's tiers by strength; benchmarks/balanced_polar.py; on the axis the "
+            f"one-ray plans hold): use preset='default' or 'high', or compare two grids of "
+            f"your own, finer in every count (nodes, se_nodes, overlap_nodes, overlap_floor; "
+            f"see jmse's docstring)")
 
 
 def _beyond_checked(strength, u, symmetric, cancellation=1.0, balanced=False):

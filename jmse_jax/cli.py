@@ -182,9 +182,9 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
     """The warnings ``jmse`` gives a concrete design, for designs that run under ``jit`` (where
     it cannot give them): ``aberration_strength`` beyond ``CHECKED_STRENGTH``, the wavefront
     slope beyond ``CHECKED_SLOPE``, terms that cancel beyond what the preset was checked at
-    (``BALANCED_CANCELLATION``, or ``CHECKED_CANCELLATION`` with the default's balanced
-    tier), and peak ``S_x / S_n`` beyond ``CHECKED_SNR``. Leaves of shape (n,), one design
-    per row; the strength and symmetry of each come from the
+    (``BALANCED_CANCELLATION``, or ``CHECKED_CANCELLATION`` with a preset's balanced
+    grid: the default's and ``"high"``'s), and peak ``S_x / S_n`` beyond ``CHECKED_SNR``.
+    Leaves of shape (n,), one design per row; the strength and symmetry of each come from the
     library's own choice of plan (``_concrete_choice``), the bounds from ``_beyond_checked``,
     the noise check is the library's (``_warn_beyond_checked_snr``). Each warning goes to
     stderr as one line; returns their texts."""

@@ -541,22 +541,21 @@ def test_cancellation_of_terms_against_the_analytic_slopes():
 def test_terms_that_cancel_warn_off_the_axis_without_the_balanced_tier():
     """Defocus set against spherical aberration a hair off the axis (``W = 10 rho^2 - 7
     rho^4``, cancellation 6, strength 5.7): such designs were up to 8e-2 off in the default's
-    tiers by strength and 2.6e-1 in ``"high"`` (benchmarks/balanced_polar.py). The default
-    takes its balanced tier (``test_radial``), silently; ``"fast"`` and ``"high"``, which
-    have none, warn, and so does astigmatism at the medial focus (cancellation 3, strength
-    14; 8.7e-3 off in the default's tier 3). The same design on the axis (its one-ray plan
-    holds), pure spherical aberration of that strength, defocus set against field curvature
-    (one shape), the Fig. 1 point (cancellation 1.1) and grids of the caller's own give no
-    warning."""
+    tiers by strength and 2.6e-1 in ``"high"``'s own grid (benchmarks/balanced_polar.py).
+    The default and ``"high"`` take their balanced grids (``test_radial``), silently;
+    ``"fast"``, which has none, warns, and so does astigmatism at the medial focus
+    (cancellation 3, strength 14; 8.7e-3 off in the default's tier 3). The same design on
+    the axis (its one-ray plan holds), pure spherical aberration of that strength, defocus
+    set against field curvature (one shape), the Fig. 1 point (cancellation 1.1) and grids
+    of the caller's own give no warning."""
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
     design = dict(w020=10.0, w040=-7.0)
-    for preset in ("fast", "high"):
-        with pytest.warns(UserWarning, match=r"the terms of the design cancel much of each "
-                                             r"other's wavefront slope: their "
-                                             r"aberration_strength taken one by one sums to 6 "
-                                             r"times the design's \(from 2.5 at a strength of "
-                                             r"2.5 the default takes its balanced tier\)"):
-            jj.jmse(jj.Seidel(**design, w222=1e-7), 1.0, 0.5, signal, noise, preset=preset)
+    with pytest.warns(UserWarning, match=r"the terms of the design cancel much of each "
+                                         r"other's wavefront slope: their "
+                                         r"aberration_strength taken one by one sums to 6 "
+                                         r"times the design's \(from 2.5 at a strength of "
+                                         r"2.5 the default and 'high' take a balanced grid\)"):
+        jj.jmse(jj.Seidel(**design, w222=1e-7), 1.0, 0.5, signal, noise, preset="fast")
     with pytest.warns(UserWarning, match=r"sums to 3 times"):
         jj.jmse(jj.Seidel(w020=-10.0, w222=20.0), 1.0, 0.5, signal, noise, preset="fast")
     with warnings.catch_warnings():
