@@ -63,6 +63,8 @@ __all__ = [
     "CHECKED_SLOPE",
     "CHECKED_STRENGTH",
     "HIGH_BALANCED_GRID",
+    "HIGH_RAY_GRID",
+    "HIGH_STEEP_GRID",
     "SEQUENTIAL_VMAP_BACKENDS",
     "STEEP_SLOPE",
     "U_MAX",
@@ -329,11 +331,34 @@ BALANCED_GRID = dict(nodes=(160, 48), se_nodes=(4800, 256), overlap_nodes=(96, 9
 HIGH_BALANCED_GRID = dict(nodes=(160, 48), se_nodes=(4800, 960), overlap_nodes=(96, 96),
                           overlap_floor=64, peaks=True)
 
+#: The steep grid of the ``"high"`` preset, taken (as the default's steep tier) by designs
+#: off the axis steeper than ``STEEP_SLOPE``. ``"high"``'s own grid was 1.7e-2 off on 25
+#: waves of coma at u = 0.3 (slope 58) and 2.8e-2 on 29 at u = 0.2 (slope 67), where the
+#: default's steep tier holds 1e-4: on the 69 designs of ``benchmarks/high_steep.py``
+#: (session 65; single terms and mixtures of slope 21-67 at u 0.1-0.3, within
+#: ``CHECKED_SLOPE``) it left 12 more than 1e-4 off. Its own grid with the overlap rule
+#: (64, 64) to (96, 96) still left astigmatism 2.3e-3 off (its 80 radial OTF nodes); (96,
+#: 48) / (4800, 960) with (64, 64) floor 64, the default's steep counts, 6.9e-5; (128, 64) /
+#: (6400, 960) with (64, 64) 6.5e-5 (a mixture, the overlap rule); this grid 1.2e-6
+#: (``results/high_steep.md``).
+HIGH_STEEP_GRID = dict(nodes=(128, 64), se_nodes=(6400, 960), overlap_nodes=(80, 80),
+                       overlap_floor=80)
+
+#: The counts of the ``"high"`` preset's one-ray plan (``_radial_plans``), over its own grid:
+#: the default's strong one-ray plan (``_RAY_GRIDS``) with ``"high"``'s fine counts. With
+#: ``"high"``'s own counts along the ray (overlap rule (48, 48)) the preset was far off on
+#: designs on the axis of many waves: on the 1500 designs of ``balanced_one_ray.py`` at
+#: noise 1e-3 to 1e-6 (defocus, and defocus balanced against spherical aberration, strength
+#: 1-45) 197 more than 1e-4 off, up to 6.5e-1 (45 of strength at u = 0.5, slope 64; pure
+#: defocus there 5.1e-1); with these counts none, worst 7.0e-5, the default's errors on
+#: every one of them (session 65). About 60 ms a design on 2 cores (was about 15).
+HIGH_RAY_GRID = dict(nodes=(256, 48), se_nodes=(4800, 960), overlap_nodes=(128, 96))
+
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
                  "overlap_floor")
 #: Preset entries that are not ``jmse`` keywords.
-_PRESET_ONLY = ("tiers", "radial", "balanced")
+_PRESET_ONLY = ("tiers", "radial", "balanced", "steep", "ray")
 
 #: Named accuracy/speed settings of ``jmse``. ``nodes`` are OTF nodes per polar triangle
 #: (radial, angular), ``se_nodes`` the finer nodes on which the OTF is interpolated and
@@ -360,12 +385,12 @@ PRESETS: dict[str, dict] = {
     "fast": dict(
         quadrature="polar", nodes=(24, 16), se_nodes=(400, 120), otf_method="overlap",
         overlap_nodes=(28, 16), tiers=None, radial=True,
-        overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=None,
+        overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=None, steep=None, ray=None,
     ),
     "default": dict(
         quadrature="polar", nodes=(40, 20), se_nodes=(2400, 160), otf_method="overlap",
         overlap_nodes=(28, 24), tiers=DEFAULT_TIERS, radial=True,
-        overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=BALANCED_GRID,
+        overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=BALANCED_GRID, steep=None, ray=None,
     ),
     # 80 radial OTF nodes for H's (1 - r)^(3/2) edge on bands that reach the cutoff, 2800
     # radial S_e nodes for the ridges along the OTF's zeros at high SNR; each count differs
@@ -375,6 +400,7 @@ PRESETS: dict[str, dict] = {
         quadrature="polar", nodes=(80, 40), se_nodes=(2800, 960), otf_method="overlap",
         overlap_nodes=(48, 48), tiers=None, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=True, balanced=HIGH_BALANCED_GRID,
+        steep=HIGH_STEEP_GRID, ray=HIGH_RAY_GRID,
     ),
 }
 
@@ -394,6 +420,8 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
                 options["tiers"] = None
                 options["radial"] = False
                 options["balanced"] = None
+                options["steep"] = None
+                options["ray"] = None
     check_choice("quadrature", options["quadrature"], QUADRATURES)
     check_choice("otf_method", options["otf_method"], OTF_METHODS)
     check_count("B", options["B"])
@@ -879,8 +907,12 @@ def _tier_index(strength, u, tiers):
     for bound, u_bound, *_ in tiers[:-1]:
         past = past & ((strength > bound) | (u > u_bound))
         index = index + past.astype(jnp.int32)
-    steep = strength > STEEP_SLOPE * _band_reach(u)
-    return jnp.where(steep, len(tiers) - 1, index).astype(jnp.int32)
+    return jnp.where(_steep(strength, u), len(tiers) - 1, index).astype(jnp.int32)
+
+
+def _steep(strength, u):
+    """Whether a design is steeper than ``STEEP_SLOPE`` (traceable)."""
+    return strength > STEEP_SLOPE * _band_reach(u)
 
 
 def _plain_one_ray_merit(options, dtype, operands):
@@ -1063,9 +1095,12 @@ def _radial_applies(options, signal, noise) -> bool:
             and options["se_nodes"] is not None and signal.isotropic and noise.isotropic)
 
 
-def _radial_plans(plans):
+def _radial_plans(plans, ray=None):
     """The one-ray plans standing in for ``plans`` on rotationally symmetric designs, and the
     first plan index of the second group.
+
+    ``ray`` (a preset's ``ray`` entry, ``HIGH_RAY_GRID``): one plan over the first plan's grid
+    with these counts, whatever the plans.
 
     The plans are split in two groups, each served by its last (finest) plan's grid counts
     along the ray, with ``_RAY_GRIDS`` over them when there are two groups: the first half
@@ -1073,6 +1108,9 @@ def _radial_plans(plans):
     ms at most, and they add to the compile time of the default (two plans: about 10-15 %
     more CPU time to compile its value_and_grad), so two cover its five tiers.
     """
+    if ray is not None:
+        first = {k: v for k, v in plans[0][0].items() if k != "_remat_otf"}
+        return (({**first, **ray, "_radial": True}, None),), 1
     split = min(_WEAK_PLANS, -(-len(plans) // 2))
     groups = (plans[:split], plans[split:]) if len(plans) > 1 else (plans,)
     overrides = _RAY_GRIDS if len(groups) == len(_RAY_GRIDS) else ({},) * len(groups)
@@ -1644,39 +1682,50 @@ def _prepare(arguments, options):
     tiers = options.pop("tiers")
     radial = options.pop("radial") and _radial_applies(options, signal, noise)
     balanced = options.pop("balanced")  # None with a fixed grid (``jmse_options``)
-    return _Static((options, tiers, radial, dtype, balanced)), inputs
+    steep, ray = options.pop("steep"), options.pop("ray")
+    return _Static((options, tiers, radial, dtype, balanced, steep, ray)), inputs
 
 
 def _route(aberrations, field, u, signal, noise, **options):
     """Which plan ``jmse`` (with these options) takes for a concrete design, as a dict:
     ``tier`` (index into the tiers, ``len(DEFAULT_TIERS)`` for the balanced tier, the tier
     by strength when a one-ray plan runs; None without tiers), ``balanced`` (the preset's
-    balanced grid runs: ``BALANCED_GRID``, ``HIGH_BALANCED_GRID``), ``one_ray`` (a one-ray
+    balanced grid runs: ``BALANCED_GRID``, ``HIGH_BALANCED_GRID``), ``steep`` (the steep
+    grid of a preset without tiers runs: ``HIGH_STEEP_GRID``), ``one_ray`` (a one-ray
     plan runs, ``jmse_jax._radial``) and ``path`` (the shortcut's ``"first"`` or ``"trial"``
     grid, or the plan's own ``"grid"``); and the ``value`` it returns. For the benchmarks."""
     static, inputs = _prepare((aberrations, field, u, signal, noise), jmse_options(**options))
     value, index, symmetric, path = _concrete_merit(static, inputs)
-    tiers, balanced = static.value[1], static.value[4]
+    tiers, balanced, steep = static.value[1], static.value[4], static.value[5]
     takes_balanced = (balanced is not None and not symmetric
-                      and index == _n_strength_plans(tiers))
+                      and index == _n_strength_plans(static))
+    takes_steep = tiers is None and steep is not None and not symmetric and index == 1
     tier = None if tiers is None else index
-    return dict(tier=tier, balanced=takes_balanced, one_ray=symmetric, path=path, value=value)
+    return dict(tier=tier, balanced=takes_balanced, steep=takes_steep, one_ray=symmetric,
+                path=path, value=value)
 
 
 def _base_plans(static):
-    """The plans of ``static``: the tiers' (or the one fixed grid), then the balanced
-    tier's when there is one (``BALANCED_GRID``)."""
-    options, tiers, _, _, balanced = static.value
-    plans = ((options, None),) if tiers is None else _tier_plans(options, tiers)
+    """The plans of ``static``: the tiers' (or the one fixed grid and, when the preset has
+    one, its steep grid, ``HIGH_STEEP_GRID``), then the balanced grid when there is one
+    (``BALANCED_GRID``, ``HIGH_BALANCED_GRID``)."""
+    options, tiers, _, _, balanced, steep, _ = static.value
+    if tiers is not None:
+        plans = _tier_plans(options, tiers)
+    elif steep is not None:
+        plans = ((options, None), ({**options, **steep, "_remat_otf": _REMAT_OTF}, None))
+    else:
+        plans = ((options, None),)
     if balanced is not None:
         plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
     return plans
 
 
 def _tier_plans_of(static, plans):
-    """The plans of ``_base_plans`` that are tiers by strength (the balanced tier's is not:
-    the one-ray plans are drawn from the tiers alone)."""
-    return plans[:len(plans) - (static.value[4] is not None)]
+    """The plans of ``_base_plans`` from which the one-ray plans are drawn: the tiers by
+    strength, or a preset's one fixed grid (not its steep or balanced grid)."""
+    tiers = static.value[1]
+    return plans[:1 if tiers is None else len(tiers)]
 
 
 def _tier_of(static, aberrations, field, u, cancelling=False):
@@ -1686,9 +1735,9 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
     takes the balanced tier. The cancellation is computed only where it can matter, with
     the balanced tier or ``cancelling`` (for the warnings) and from ``CANCELLING_STRENGTH``
     (most designs are weaker than that); elsewhere it is 1."""
-    tiers, balanced = static.value[1], static.value[4]
+    tiers, balanced, steep = static.value[1], static.value[4], static.value[5]
     zero = jnp.zeros((), jnp.int32)
-    if tiers is None and balanced is None and not cancelling:
+    if tiers is None and balanced is None and steep is None and not cancelling:
         return zero, zero, jnp.ones(())
     strength = _strength(aberrations, field, u)
     cancellation = jnp.ones((), strength.dtype)
@@ -1697,18 +1746,25 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
             strength >= CANCELLING_STRENGTH,
             lambda *a: _cancellation(*a).astype(strength.dtype),
             lambda *_: cancellation, aberrations, field, u)
-    # Without tiers (``"high"``) the one fixed grid is plan 0 and the balanced grid plan 1.
-    tier = zero if tiers is None else _tier_index(strength, jax.lax.stop_gradient(u), tiers)
+    # Without tiers (``"high"``) the one fixed grid is plan 0, the steep grid plan 1 (taken,
+    # as the default's steep tier, past ``STEEP_SLOPE``) and the balanced grid the last.
+    if tiers is not None:
+        tier = _tier_index(strength, jax.lax.stop_gradient(u), tiers)
+    elif steep is not None:
+        tier = _steep(strength, jax.lax.stop_gradient(u)).astype(jnp.int32)
+    else:
+        tier = zero
     if balanced is None:
         return tier, tier, cancellation
-    index = jnp.where(_balancing(strength, cancellation), _n_strength_plans(tiers), tier)
+    index = jnp.where(_balancing(strength, cancellation), _n_strength_plans(static), tier)
     return index.astype(jnp.int32), tier, cancellation
 
 
-def _n_strength_plans(tiers):
-    """The number of plans by strength: the tiers', or the one fixed grid (``tiers`` None);
-    the balanced plan, where there is one, comes after them (``_base_plans``)."""
-    return 1 if tiers is None else len(tiers)
+def _n_strength_plans(static):
+    """The number of plans before the balanced one (``_base_plans``): the tiers', or a
+    preset's one fixed grid and its steep grid if it has one."""
+    tiers, steep = static.value[1], static.value[5]
+    return len(tiers) if tiers is not None else 1 + (steep is not None)
 
 
 def _balancing(strength, cancellation):
@@ -1735,7 +1791,7 @@ def _plans_and_index(static, aberrations, field, u):
     symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
     n_base = None
     if symmetric is not False:
-        radial_plans, split = _radial_plans(_tier_plans_of(static, plans))
+        radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])
         group = (by_strength >= split).astype(jnp.int32) if len(radial_plans) > 1 else 0
         if symmetric is True:
             plans, index = radial_plans, group + jnp.zeros((), jnp.int32)
@@ -1911,7 +1967,7 @@ def _concrete_merit(static, inputs, warn=False):
                                  peaks=bool(symmetric) or static.value[0]["peaks"])
     plan = plans[index]
     if symmetric:
-        radial_plans, split = _radial_plans(_tier_plans_of(static, plans))
+        radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])
         plan = radial_plans[int(len(radial_plans) > 1 and by_strength >= split)]
     value, path = _eager_tier_choice(plan, dtype, inputs)
     # A one-ray plan is drawn from the tiers by strength (not the balanced tier).

@@ -202,6 +202,50 @@ def test_high_takes_its_balanced_grid_where_terms_cancel():
     assert abs(own / expected - 1.0) > 1e-1
 
 
+def test_high_one_ray_plan_on_many_waves_on_the_axis():
+    """32 waves of defocus on the axis at u = 0.5 (strength 45, slope 64): ``"high"``'s one
+    ray with its own counts (overlap rule (48, 48)) was 1.5e-1 off at noise 1e-4 (5.1e-1 at
+    1e-6). With ``HIGH_RAY_GRID`` the preset is within 1e-7 of the converged ray (measured
+    1e-9), concrete and jitted."""
+    ab, u, noise = jj.Seidel(w020=31.819805153394636), 0.5, jj.WhiteNoise(1e-4)
+    expected = _one_ray(ab, 0.0, u, noise=noise, **BALANCED_REFERENCE)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        route = _merit._route(ab, 0.0, u, SIGNAL, noise, preset="high")
+    assert route["one_ray"] and not route["steep"] and not route["balanced"]
+    assert float(route["value"]) == pytest.approx(expected, rel=1e-7)
+    jitted = float(jmse_fn(preset="high")(ab, 0.0, u, SIGNAL, noise))
+    assert jitted == pytest.approx(float(route["value"]), rel=1e-12)
+    own = _one_ray(ab, 0.0, u, noise=noise, **HIGH_OWN_GRID)
+    assert abs(own / expected - 1.0) > 1e-2
+
+
+#: The reference grid of ``benchmarks/small_u_single_terms.py``.
+SMALL_U_REFERENCE = dict(nodes=(160, 96), se_nodes=(8000, 1920), overlap_nodes=(96, 96),
+                         overlap_floor=96)
+
+
+def test_high_takes_its_steep_grid_on_many_waves_at_small_u():
+    """25 waves of coma at u = 0.3 (slope 58, past ``STEEP_SLOPE``): ``"high"``'s own grid was
+    1.7e-2 off (``benchmarks/high_steep.py``). The preset takes its steep grid
+    (``HIGH_STEEP_GRID``) without a warning, concrete and jitted alike, within 1e-5 of a
+    finer polar grid."""
+    ab, u = jj.Seidel(w131=24.74873734152916), 0.3
+    expected = _planar(ab, 1.0, u, **SMALL_U_REFERENCE)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        route = _merit._route(ab, 1.0, u, SIGNAL, NOISE, preset="high")
+    assert route["steep"] and not route["balanced"] and not route["one_ray"]
+    assert float(route["value"]) == pytest.approx(expected, rel=1e-5)
+    jitted = float(jmse_fn(preset="high")(ab, 1.0, u, SIGNAL, NOISE))
+    assert jitted == pytest.approx(float(route["value"]), rel=1e-12)
+    own = _planar(ab, 1.0, u, **HIGH_OWN_GRID)
+    assert abs(own / expected - 1.0) > 1e-2
+    # The Fig. 1 point keeps "high"'s own grid.
+    fig1 = _merit._route(jj.Seidel(**problems.FIG1), 0.95, 0.2, SIGNAL, NOISE, preset="high")
+    assert not (fig1["steep"] or fig1["balanced"] or fig1["one_ray"])
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("preset", ["default", "high"])
 def test_balanced_tier_gradient_against_finite_differences(preset):
