@@ -1516,7 +1516,8 @@ def jmse(
         cancel each other's slope (defocus set against spherical aberration, say;
         ``BALANCED_CANCELLATION``) takes a balanced tier of its own (``BALANCED_GRID``,
         about 0.2 s a value; ``"high"`` has one too, ``HIGH_BALANCED_GRID``, about
-        0.3 s). The two weakest tiers first try a
+        0.3 s, and a steep grid past ``STEEP_SLOPE``, ``HIGH_STEEP_GRID``, and finer
+        counts along its one ray, ``HIGH_RAY_GRID``). The two weakest tiers first try a
         cheaper grid and keep its value when a coarse check grid (computed in float32)
         agrees with it to 1e-5 and its own interpolation-error estimate is below 1e-5
         (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the band reaches
