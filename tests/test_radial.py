@@ -182,6 +182,20 @@ HIGH_OWN_GRID = {k: jj.PRESETS["high"][k]
                  for k in ("nodes", "se_nodes", "overlap_nodes", "overlap_floor", "peaks")}
 
 
+def _high_route(ab, field, u, noise, expected, rtol, own, off):
+    """``"high"``'s route for a design (``_merit._route``, no warning allowed), checked: its
+    value within ``rtol`` of ``expected``, the jitted preset's the same, and ``own`` (the
+    value of ``"high"``'s own grid) more than ``off`` from ``expected``."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        route = _merit._route(ab, field, u, SIGNAL, noise, preset="high")
+    assert float(route["value"]) == pytest.approx(expected, rel=rtol)
+    jitted = float(jmse_fn(preset="high")(ab, field, u, SIGNAL, noise))
+    assert jitted == pytest.approx(float(route["value"]), rel=1e-12)
+    assert abs(own / expected - 1.0) > off
+    return route
+
+
 def test_high_takes_its_balanced_grid_where_terms_cancel():
     """``W = c (rho^2 - 0.7 rho^4)`` at u = 0.2, strength 15, a hair off the axis: ``"high"``'s
     own grid was 2.6e-1 off there (``benchmarks/balanced_polar.py``). The preset takes its
@@ -191,15 +205,9 @@ def test_high_takes_its_balanced_grid_where_terms_cancel():
     symmetric = jj.Seidel(w020=66.29, w040=-46.4)
     ab, u, noise = jj.Seidel(w020=66.29, w040=-46.4, w222=1e-7), 0.2, jj.WhiteNoise(1e-4)
     expected = _one_ray(symmetric, 0.0, u, noise=noise, **BALANCED_REFERENCE)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        route = _merit._route(ab, 1.0, u, SIGNAL, noise, preset="high")
-    assert route["balanced"] and route["tier"] is None and not route["one_ray"]
-    assert float(route["value"]) == pytest.approx(expected, rel=1e-6)
-    jitted = float(jmse_fn(preset="high")(ab, 1.0, u, SIGNAL, noise))
-    assert jitted == pytest.approx(float(route["value"]), rel=1e-12)
     own = float(jj.jmse(ab, 1.0, u, SIGNAL, noise, **HIGH_OWN_GRID))
-    assert abs(own / expected - 1.0) > 1e-1
+    route = _high_route(ab, 1.0, u, noise, expected, 1e-6, own, 1e-1)
+    assert route["balanced"] and route["tier"] is None and not route["one_ray"]
 
 
 def test_high_one_ray_plan_on_many_waves_on_the_axis():
@@ -209,15 +217,9 @@ def test_high_one_ray_plan_on_many_waves_on_the_axis():
     1e-9), concrete and jitted."""
     ab, u, noise = jj.Seidel(w020=31.819805153394636), 0.5, jj.WhiteNoise(1e-4)
     expected = _one_ray(ab, 0.0, u, noise=noise, **BALANCED_REFERENCE)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        route = _merit._route(ab, 0.0, u, SIGNAL, noise, preset="high")
-    assert route["one_ray"] and not route["steep"] and not route["balanced"]
-    assert float(route["value"]) == pytest.approx(expected, rel=1e-7)
-    jitted = float(jmse_fn(preset="high")(ab, 0.0, u, SIGNAL, noise))
-    assert jitted == pytest.approx(float(route["value"]), rel=1e-12)
     own = _one_ray(ab, 0.0, u, noise=noise, **HIGH_OWN_GRID)
-    assert abs(own / expected - 1.0) > 1e-2
+    route = _high_route(ab, 0.0, u, noise, expected, 1e-7, own, 1e-2)
+    assert route["one_ray"] and not route["steep"] and not route["balanced"]
 
 
 #: The reference grid of ``benchmarks/small_u_single_terms.py``.
@@ -232,15 +234,9 @@ def test_high_takes_its_steep_grid_on_many_waves_at_small_u():
     finer polar grid."""
     ab, u = jj.Seidel(w131=24.74873734152916), 0.3
     expected = _planar(ab, 1.0, u, **SMALL_U_REFERENCE)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        route = _merit._route(ab, 1.0, u, SIGNAL, NOISE, preset="high")
-    assert route["steep"] and not route["balanced"] and not route["one_ray"]
-    assert float(route["value"]) == pytest.approx(expected, rel=1e-5)
-    jitted = float(jmse_fn(preset="high")(ab, 1.0, u, SIGNAL, NOISE))
-    assert jitted == pytest.approx(float(route["value"]), rel=1e-12)
     own = _planar(ab, 1.0, u, **HIGH_OWN_GRID)
-    assert abs(own / expected - 1.0) > 1e-2
+    route = _high_route(ab, 1.0, u, NOISE, expected, 1e-5, own, 1e-2)
+    assert route["steep"] and not route["balanced"] and not route["one_ray"]
     # The Fig. 1 point keeps "high"'s own grid.
     fig1 = _merit._route(jj.Seidel(**problems.FIG1), 0.95, 0.2, SIGNAL, NOISE, preset="high")
     assert not (fig1["steep"] or fig1["balanced"] or fig1["one_ray"])
