@@ -26,6 +26,7 @@ Writes ``results/balanced_tier.json`` and ``.md`` (``--name`` to change).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import sys
@@ -169,6 +170,17 @@ def extra_designs():
     return out
 
 
+@contextlib.contextmanager
+def _tiers_by_strength_alone():
+    """The default without its balanced tier, for the duration of the block."""
+    saved = _merit.PRESETS["default"]["balanced"]
+    _merit.PRESETS["default"]["balanced"] = None
+    try:
+        yield
+    finally:
+        _merit.PRESETS["default"]["balanced"] = saved
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--grids", nargs="+", default=["default", "B"], choices=tuple(GRIDS))
@@ -200,33 +212,24 @@ def main() -> None:
     objects = [d[1] for d in designs]
     if args.only_failing:  # the default's tiers by strength alone (no balanced tier)
         keep = []
-        saved = _merit.PRESETS["default"]["balanced"]
-        _merit.PRESETS["default"]["balanced"] = None
-        try:
+        with _tiers_by_strength_alone():
             for row, ab in zip(rows, objects, strict=True):
                 v = float(jj.jmse(ab, row["field"], row["u"], SIGNAL,
                                   jj.WhiteNoise(row["noise"])))
                 if abs(v / row["reference"] - 1) > 1e-4:
                     keep.append((row, ab))
-        finally:
-            _merit.PRESETS["default"]["balanced"] = saved
         rows, objects = [k[0] for k in keep], [k[1] for k in keep]
         print(f"{len(rows)} designs the default has off", flush=True)
     for name in args.grids:
         grid = GRIDS[name]
         t0 = time.perf_counter()
-        saved = _merit.PRESETS["default"]["balanced"]
-        if name == "tiers":
-            _merit.PRESETS["default"]["balanced"] = None
-        try:
+        with _tiers_by_strength_alone() if name == "tiers" else contextlib.nullcontext():
             for row, ab in zip(rows, objects, strict=True):
                 t = time.perf_counter()
                 v = float(jj.jmse(ab, row["field"], row["u"], SIGNAL,
                                   jj.WhiteNoise(row["noise"]), **grid))
                 row["times"][name] = time.perf_counter() - t
                 row["errors"][name] = v / row["reference"] - 1.0
-        finally:
-            _merit.PRESETS["default"]["balanced"] = saved
         errs = [abs(r["errors"][name]) for r in rows]
         bad = sum(e > 1e-4 for e in errs)
         times = sorted(r["times"][name] for r in rows)
