@@ -322,6 +322,72 @@ class Zernike(AbstractAberrations):
                            self.coefficients.dtype)
         return Zernike(self.coefficients * keep, noll=self.noll)
 
+    def seidel_like_terms(self) -> list:
+        """The wavefront, less piston and tilt, as a list of terms ``f(x, y)`` in the shapes
+        of Seidel's terms, for ``jmse``'s measure of how much the terms cancel.
+
+        A Zernike polynomial is itself a balanced combination (``Z11`` holds defocus against
+        spherical aberration; coma holds its tilt), so taken one by one the Zernike terms
+        hide the cancellation that the same wavefront shows in Seidel's terms. Here the
+        wavefront is split instead by angular order ``m`` and power ``P`` of ``rho``: one term
+        ``rho^P (a cos m theta + b sin m theta)`` per pair (any orientation), each ``m = 1``
+        term less its own best-fit tilt (``4 / (P + 3)`` of ``rho cos theta``; for
+        ``P = 3`` Seidel's coma less its tilt), and the astigmatism ``rho^2 cos 2(theta -
+        phi)`` taken as Seidel takes it, ``rho^2 cos^2``, whose mean, ``rho^2 / 2``, moves to
+        the defocus. That mean's sign (which of the two axes the ``cos^2`` is along) is chosen
+        to make the defocus term larger, so a wavefront that Seidel's coefficients give
+        exactly cancels at least as much here as there. Pure defocus and spherical
+        aberration, and coma and astigmatism along ``y``, give Seidel's terms exactly."""
+        c = self.coefficients
+        groups = {key: (jnp.dot(w[0], c), jnp.dot(w[1], c))
+                  for key, w in _seidel_like_groups(self.noll)}
+        defocus = groups.pop((0, 2), None)
+        astigmatism = groups.pop((2, 2), None)
+        groups.pop((0, 0), None)  # piston
+        groups.pop((1, 1), None)  # tilt (Z2, Z3 and the linear parts of coma)
+        terms = []
+        if astigmatism is not None:
+            a, b = astigmatism
+            amplitude = jnp.hypot(a, b)
+            c2 = jnp.zeros_like(amplitude) if defocus is None else defocus[0]
+            shift = jnp.where(c2 >= 0, -amplitude, amplitude)  # |c2 - shift| = |c2| + A
+            terms.append(lambda x, y, a=a, b=b, s=shift: (
+                a * (y * y - x * x) + b * (2.0 * x * y) + s * (x * x + y * y)))
+            defocus = (c2 - shift, None)
+        if defocus is not None:
+            terms.append(lambda x, y, c2=defocus[0]: c2 * (x * x + y * y))
+        for (m, power), (a, b) in sorted(groups.items()):
+            terms.append(functools.partial(_seidel_like_term, m, power, a, b))
+        return terms
+
+
+@functools.cache
+def _seidel_like_groups(noll: tuple[int, ...]):
+    """Host constants of ``Zernike.seidel_like_terms``: for each ``(|m|, P)`` the weights that
+    take the coefficients to the ``cos`` (row 0) and ``sin`` (row 1) amplitudes of
+    ``rho^P e^{i |m| theta}``."""
+    groups = {}
+    for i, j in enumerate(noll):
+        n, m = noll_to_nm(j)
+        norm = math.sqrt(n + 1) if m == 0 else math.sqrt(2 * (n + 1))
+        for k, coefficient in enumerate(_radial_coefficients(n, m)):
+            weights = groups.setdefault((abs(m), abs(m) + 2 * k), np.zeros((2, len(noll))))
+            weights[0 if m >= 0 else 1, i] += norm * coefficient
+    return tuple(sorted(groups.items()))
+
+
+def _seidel_like_term(m, power, a, b, x, y):
+    """``rho^power (a cos m theta + b sin m theta)`` (``theta`` from +y), less its best-fit
+    tilt when ``m = 1``."""
+    rho2 = x * x + y * y
+    re, im = jnp.ones_like(rho2), jnp.zeros_like(rho2)
+    for _ in range(m):  # rho^m e^{i m theta} = (y + i x)^m
+        re, im = re * y - im * x, re * x + im * y
+    term = rho2 ** ((power - m) // 2) * (a * re + b * im)
+    if m == 1:
+        term = term - (4.0 / (power + 3)) * (a * y + b * x)
+    return term
+
 
 def wavefront(aberrations: AbstractAberrations, x, y, field=0.0):
     """Wavefront (OPD) in waves at normalised pupil points ``(x, y)``.

@@ -17,7 +17,7 @@ import numpy as np
 from jax.custom_derivatives import SymbolicZero
 from jax.flatten_util import ravel_pytree
 
-from ._aberrations import AbstractAberrations, Seidel
+from ._aberrations import AbstractAberrations, Seidel, Zernike
 from ._numerics import (
     EXACT,
     all_finite,
@@ -829,29 +829,42 @@ def _strength(aberrations, field, u):
     """``aberration_strength`` without validation (traceable; no gradient flows)."""
     aberrations, field, u = jax.lax.stop_gradient((aberrations.without_tilt(), field, u))
     dtype = common_dtype(aberrations, field, u)
+    return _max_slope(lambda x, y: aberrations(x, y, field), dtype) * _band_reach(u)
+
+
+def _max_slope(wavefront, dtype):
+    """``max |grad W|`` of ``wavefront(x, y)`` over the strength's sample points."""
     rho, theta = np.meshgrid(_SLOPE_RADII, _SLOPE_ANGLES)
     x = jnp.asarray((rho * np.sin(theta)).ravel(), dtype)
     y = jnp.asarray((rho * np.cos(theta)).ravel(), dtype)
     # W is pointwise in (x, y), so the gradient of the sum is the pointwise gradient.
-    gx, gy = jax.grad(lambda x, y: jnp.sum(aberrations(x, y, field)), argnums=(0, 1))(x, y)
-    slope = jnp.max(jnp.sqrt(gx * gx + gy * gy))
-    return slope * _band_reach(u)
+    gx, gy = jax.grad(lambda x, y: jnp.sum(wavefront(x, y)), argnums=(0, 1))(x, y)
+    return jnp.max(jnp.sqrt(gx * gx + gy * gy))
 
 
 def _cancellation(aberrations, field, u):
     """The ``aberration_strength`` of each term of ``aberrations`` alone (each coefficient,
     tilt removed), summed, over the design's own (traceable; 1 for a single term; no
     gradient). Seidel's field curvature is defocus at a given field point, so ``w220 h^2``
-    is folded into ``w020`` first (one shape, one term). A design of zero strength gives 1."""
+    is folded into ``w020`` first (one shape, one term). A ``Zernike`` design is split into
+    terms of Seidel's shapes (``Zernike.seidel_like_terms``), not into its polynomials:
+    ``Z4`` and ``Z11`` set against each other cancel as much as the same defocus and
+    spherical aberration given as Seidel coefficients, where their Zernike terms alone
+    showed about half of it. A design of zero strength gives 1."""
     aberrations = jax.lax.stop_gradient(aberrations.without_tilt())
     if isinstance(aberrations, Seidel):
         a, h2 = aberrations, jnp.square(field)
         aberrations = Seidel(w020=a.w020 + a.w220 * h2, w040=a.w040, w131=a.w131,
                              w222=a.w222, w220=0.0, w311=a.w311, w111=a.w111)
-    flat, unravel = ravel_pytree(aberrations)
     total = _strength(aberrations, field, u)
-    eye = jnp.eye(flat.shape[0], dtype=flat.dtype)
-    parts = jax.vmap(lambda e: _strength(unravel(e * flat), field, u))(eye)
+    if isinstance(aberrations, Zernike):
+        dtype = common_dtype(aberrations, field, u)
+        slopes = [_max_slope(term, dtype) for term in aberrations.seidel_like_terms()]
+        parts = sum(slopes, jnp.zeros((), dtype)) * _band_reach(jax.lax.stop_gradient(u))
+    else:
+        flat, unravel = ravel_pytree(aberrations)
+        eye = jnp.eye(flat.shape[0], dtype=flat.dtype)
+        parts = jax.vmap(lambda e: _strength(unravel(e * flat), field, u))(eye)
     return jnp.where(total > 0, jnp.sum(parts) / jnp.where(total > 0, total, 1.0), 1.0)
 
 

@@ -162,7 +162,8 @@ def test_balanced_spherical_off_the_axis_takes_the_balanced_tier():
     1, which moves the JMSE by about 1e-8): its terms cancel (cancellation 6), so the default
     takes the balanced tier (``BALANCED_GRID``) without a warning, within 2e-5 of the
     symmetric design's converged ray, where its tier by strength (tier 2) alone was 8e-2
-    off (``benchmarks/balanced_polar.py``)."""
+    off (``benchmarks/balanced_polar.py``); and so does the same design given as Zernike
+    coefficients (``benchmarks/zernike_cancellation.py``)."""
     symmetric = jj.Seidel(w020=33.1, w040=-23.17)
     ab, u, noise = jj.Seidel(w020=33.1, w040=-23.17, w222=1e-7), 0.4, jj.WhiteNoise(1e-4)
     strength = float(jj.aberration_strength(ab, 1.0, u))
@@ -175,6 +176,16 @@ def test_balanced_spherical_off_the_axis_takes_the_balanced_tier():
     assert float(route["value"]) == pytest.approx(expected, rel=2e-5)
     tier2 = float(jj.jmse(ab, 1.0, u, SIGNAL, noise, **jj.DEFAULT_TIERS[2][2]))
     assert abs(tier2 / expected - 1.0) > 1e-2
+    # The same wavefront as Zernike coefficients (Z4 and Z11, 1e-7 waves of Z6's kind): its
+    # Zernike terms one by one cancel 2.5 at most, so it took tier 2 and was as far off;
+    # measured in Seidel's shapes it takes the balanced tier too.
+    zernike = jj.Zernike([(33.1 - 23.17) / (2 * math.sqrt(3)), 0.5e-7 / math.sqrt(6),
+                          -23.17 / (6 * math.sqrt(5))], noll=(4, 6, 11))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        route = _merit._route(zernike, 1.0, u, SIGNAL, noise)
+    assert route["tier"] == len(jj.DEFAULT_TIERS) and not route["one_ray"]
+    assert float(route["value"]) == pytest.approx(expected, rel=2e-5)
 
 
 #: ``"high"``'s own grid (its fixed options, without the balanced grid).
