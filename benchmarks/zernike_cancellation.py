@@ -20,7 +20,9 @@ Usage (from the repository root; about 3 min on 2 cores)::
     .venv/bin/python benchmarks/zernike_cancellation.py [--name NAME]
 
 Writes ``results/<NAME>.json`` and ``.md`` (default name ``zernike_cancellation``). To
-measure another version of the package, put its checkout first on ``PYTHONPATH``.
+measure another version of the package, put its checkout first on ``PYTHONPATH`` (the
+script calls ``_merit._prepare``, ``_merit._concrete_merit`` and ``_merit._cancellation_jit``
+besides the public API).
 """
 
 from __future__ import annotations
@@ -68,15 +70,18 @@ def main(argv=None) -> None:
     for r in stored:
         ab = as_zernike(r)
         noise = jj.WhiteNoise(r["noise"])
+        # As ``jmse`` calls it (with its warnings), keeping the index of the plan it took.
+        static, inputs = _merit._prepare((ab, r["field"], r["u"], SIGNAL, noise),
+                                         jj.jmse_options())
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            route = _merit._route(ab, r["field"], r["u"], SIGNAL, noise)
+            value, index, _, _ = _merit._concrete_merit(static, inputs, warn=True)
         rows.append(dict(
             source=r["source"], u=r["u"], noise=r["noise"], strength=r["strength"],
             seidel_cancellation=r["cancellation"],
             cancellation=float(_merit._cancellation_jit(ab, r["field"], r["u"])),
-            balanced=bool(route["balanced"]), tier=route["tier"],
-            error=float(route["value"]) / r["reference"] - 1.0,
+            balanced=int(index) == len(jj.DEFAULT_TIERS), tier=int(index),
+            error=float(value) / r["reference"] - 1.0,
             warned=any(issubclass(w.category, UserWarning) for w in caught),
             seidel_error=r["errors"]["default"]))
     seconds = time.perf_counter() - start

@@ -55,6 +55,14 @@ class AbstractAberrations(eqx.Module):
         """
         return self.chord_degree
 
+    def beyond_seidel_degree(self):
+        """Whether the wavefront may have terms of higher degree than Seidel's (4) in the
+        pupil coordinates: a Python bool, or a traced boolean where the answer depends on the
+        coefficient values. ``jmse``'s tiers were calibrated on Seidel designs, so the
+        default sends such designs to its balanced grid. The default answer follows
+        ``chord_degree`` (True when it is unknown)."""
+        return self.chord_degree is None or self.chord_degree > 3
+
     def difference(self, x, y, dx, dy, field):
         """``W(x + dx, y + dy) - W(x - dx, y - dy)``: the phase difference the overlap OTF
         engine integrates (``(dx, dy) = nu``). The default evaluates the wavefront twice;
@@ -322,25 +330,36 @@ class Zernike(AbstractAberrations):
                            self.coefficients.dtype)
         return Zernike(self.coefficients * keep, noll=self.noll)
 
+    def beyond_seidel_degree(self):
+        # Any nonzero term of radial order 5 or more (degree n in the pupil coordinates).
+        high = [i for i, j in enumerate(self.noll) if noll_to_nm(j)[0] > 4]
+        if not high:
+            return False
+        return jnp.any(self.coefficients[np.asarray(high)] != 0)
+
     def seidel_like_terms(self) -> list:
         """The wavefront, less piston and tilt, as a list of terms ``f(x, y)`` in the shapes
         of Seidel's terms, for ``jmse``'s measure of how much the terms cancel.
 
         A Zernike polynomial is itself a balanced combination (``Z11`` holds defocus against
         spherical aberration; coma holds its tilt), so taken one by one the Zernike terms
-        hide the cancellation that the same wavefront shows in Seidel's terms. Here the
-        wavefront is split instead by angular order ``m`` and power ``P`` of ``rho``: one term
-        ``rho^P (a cos m theta + b sin m theta)`` per pair (any orientation), each ``m = 1``
-        term less its own best-fit tilt (``4 / (P + 3)`` of ``rho cos theta``; for
-        ``P = 3`` Seidel's coma less its tilt), and the astigmatism ``rho^2 cos 2(theta -
-        phi)`` taken as Seidel takes it, ``rho^2 cos^2``, whose mean, ``rho^2 / 2``, moves to
-        the defocus. That mean's sign (which of the two axes the ``cos^2`` is along) is chosen
-        to make the defocus term larger, so a wavefront that Seidel's coefficients give
-        exactly cancels at least as much here as there. Pure defocus and spherical
-        aberration, and coma and astigmatism along ``y``, give Seidel's terms exactly."""
-        c = self.coefficients
+        hide the cancellation that the same wavefront shows in Seidel's terms. The part of
+        Seidel's degree (radial order ``n <= 4``) is split instead by angular order ``m`` and
+        power ``P`` of ``rho``: one term ``rho^P (a cos m theta + b sin m theta)`` per pair
+        (any orientation), the coma (``m = 1``, ``P = 3``) less its best-fit tilt, as
+        Seidel's, and the astigmatism ``rho^2 cos 2(theta - phi)`` taken as Seidel takes it,
+        ``rho^2 cos^2``, whose mean, ``rho^2 / 2``, moves to the defocus. That mean's sign
+        (which of the two axes the ``cos^2`` is along) is chosen to make the defocus term
+        larger, so a wavefront that Seidel's coefficients give exactly cancels at least as
+        much here as there. Pure defocus and spherical aberration, and coma and astigmatism
+        along ``y``, give Seidel's terms exactly. Each polynomial of higher order is a term
+        of its own (split into powers of ``rho`` they would cancel by construction: 10 to 30
+        times on random designs of Noll 4-37, against at most 7 for Seidel's terms)."""
+        low = [i for i, j in enumerate(self.noll) if noll_to_nm(j)[0] <= 4]
+        high = [i for i, j in enumerate(self.noll) if noll_to_nm(j)[0] > 4]
+        c = self.coefficients[np.asarray(low, dtype=int)]
         groups = {key: (jnp.dot(w[0], c), jnp.dot(w[1], c))
-                  for key, w in _seidel_like_groups(self.noll)}
+                  for key, w in _seidel_like_groups(tuple(self.noll[i] for i in low))}
         defocus = groups.pop((0, 2), None)
         astigmatism = groups.pop((2, 2), None)
         groups.pop((0, 0), None)  # piston
@@ -358,6 +377,9 @@ class Zernike(AbstractAberrations):
             terms.append(lambda x, y, c2=defocus[0]: c2 * (x * x + y * y))
         for (m, power), (a, b) in sorted(groups.items()):
             terms.append(functools.partial(_seidel_like_term, m, power, a, b))
+        for i in high:
+            terms.append(lambda x, y, j=self.noll[i], a=self.coefficients[i]: (
+                a * zernike_polynomial(j, x, y)))
         return terms
 
 
@@ -378,7 +400,7 @@ def _seidel_like_groups(noll: tuple[int, ...]):
 
 def _seidel_like_term(m, power, a, b, x, y):
     """``rho^power (a cos m theta + b sin m theta)`` (``theta`` from +y), less its best-fit
-    tilt when ``m = 1``."""
+    tilt (``4 / (power + 3)`` of ``rho cos theta``) when ``m = 1``."""
     rho2 = x * x + y * y
     re, im = jnp.ones_like(rho2), jnp.zeros_like(rho2)
     for _ in range(m):  # rho^m e^{i m theta} = (y + i x)^m

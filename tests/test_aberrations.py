@@ -149,16 +149,21 @@ def test_zernike_bad_input():
 def test_zernike_seidel_like_terms_sum_to_the_wavefront_less_piston_and_tilt():
     """``Zernike.seidel_like_terms`` (the split by which ``jmse`` measures how much terms
     cancel) loses nothing but piston and tilt: the terms of a design of Noll 1-22 sum to its
-    wavefront less its value at the centre and its best-fit tilt (Zernike polynomials are
-    orthogonal to tilt, so that is ``Z2`` and ``Z3``); and defocus with spherical aberration
-    becomes Seidel's two terms, ``rho^2`` and ``rho^4``, each its own."""
+    wavefront less its best-fit tilt (Zernike polynomials are orthogonal to tilt, so that is
+    ``Z2`` and ``Z3``), up to a constant; and defocus with spherical aberration becomes
+    Seidel's two terms, ``rho^2`` and ``rho^4``, each its own."""
     rng = np.random.default_rng(7)
     ab = jj.Zernike(rng.normal(size=22))
     x, y = (jnp.asarray(v) for v in rng.uniform(-0.7, 0.7, size=(2, 50)))
-    total = sum(term(x, y) for term in ab.seidel_like_terms())
+    origin = jnp.zeros(1)
+
+    def total(x, y):
+        return sum(term(x, y) for term in ab.seidel_like_terms())
+
     flat = ab.without_tilt()
-    expected = flat(x, y, 0.0) - flat(jnp.zeros(1), jnp.zeros(1), 0.0)
-    np.testing.assert_allclose(total, expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(total(x, y) - total(origin, origin),
+                               flat(x, y, 0.0) - flat(origin, origin, 0.0), rtol=0, atol=1e-12)
+    assert ab.beyond_seidel_degree()  # Noll 12-22 hold radial orders 5 and 6
     w020, w040 = 3.0, -2.0  # W = 3 rho^2 - 2 rho^4 = a4 Z4 + a11 Z11 + piston
     a11 = w040 / (6 * math.sqrt(5))
     ab = jj.Zernike([(w020 + w040) / (2 * math.sqrt(3)), a11], noll=(4, 11))
@@ -166,3 +171,6 @@ def test_zernike_seidel_like_terms_sum_to_the_wavefront_less_piston_and_tilt():
     got = [term(0.6 * rho, 0.8 * rho) for term in ab.seidel_like_terms()]
     np.testing.assert_allclose(got[0], w020 * rho**2, atol=1e-14)
     np.testing.assert_allclose(got[1], w040 * rho**4, atol=1e-14)
+    assert not ab.beyond_seidel_degree()
+    assert not bool(jj.Zernike([1.0, 0.0], noll=(4, 22)).beyond_seidel_degree())
+    assert not jj.Seidel(w040=1.0).beyond_seidel_degree()

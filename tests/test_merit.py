@@ -591,6 +591,45 @@ def test_zernike_astigmatism_takes_the_larger_of_its_two_seidel_forms():
     assert zernike == pytest.approx(1.4, rel=1e-9)
 
 
+def test_designs_beyond_seidel_degree_take_the_balanced_grid():
+    """The tiers were calibrated on Seidel designs (degree 4). On random Zernike designs of
+    Noll 4-22 and 4-37 they were up to 2.0e-3 off (``benchmarks/zernike_designs.py``), so a
+    design with a nonzero term of radial order 5 or more takes the balanced grid from a
+    strength of 2.5, whatever its cancellation. That worst design, within 1e-5 of a finer
+    polar grid (two such grids agree to 1.4e-8), where its tier (2) is 2e-3 off; and the
+    route of secondary coma (Noll 16) alone, which cancels nothing."""
+    from jmse_jax import _merit
+
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
+    ab = jj.Zernike([0.5748, 0.4421, -0.4164, -0.0005, 0.1932, 0.2031, 0.3799, 0.0834, -0.0308,
+                     -0.0842, 0.3433, -0.732, -0.0361, 0.0086, -0.3708, 0.0866, -0.1694, 0.2244,
+                     -0.0272], noll=tuple(range(4, 23)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        route = _route(ab, 0.5, 0.2, signal, noise)
+    assert route["balanced"]
+    reference = float(jj.jmse(ab, 0.5, 0.2, signal, noise, nodes=(160, 80),
+                              se_nodes=(6400, 512), overlap_nodes=(128, 128),
+                              overlap_floor=128, peaks=True))
+    assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
+    tier = float(jj.jmse(ab, 0.5, 0.2, signal, noise, **jj.DEFAULT_TIERS[2][2]))
+    assert abs(tier / reference - 1.0) > 1e-3
+
+    def plan(design, u):
+        static, inputs = _merit._prepare((design, 0.5, u, signal, noise), jj.jmse_options())
+        index, by_strength, _, strength, cancellation = _merit._concrete_choice(
+            static, *inputs[:3])
+        return int(index), int(by_strength), float(strength), float(cancellation)
+
+    balanced = len(jj.DEFAULT_TIERS)
+    index, by_strength, strength, cancellation = plan(jj.Zernike([2.0], noll=(16,)), 0.5)
+    assert index == balanced and by_strength < balanced
+    assert strength > 2.5 and cancellation == pytest.approx(1.0)
+    # Below the strength bound, or with the high-order term zero, the tiers by strength.
+    assert plan(jj.Zernike([0.02], noll=(16,)), 0.5)[0] < balanced
+    assert plan(jj.Zernike([2.0, 0.0], noll=(8, 16)), 0.5)[0] < balanced
+
+
 def test_terms_that_cancel_warn_off_the_axis_without_the_balanced_tier():
     """Defocus set against spherical aberration a hair off the axis (``W = 10 rho^2 - 7
     rho^4``, cancellation 6, strength 5.7): such designs were up to 8e-2 off in the default's
