@@ -331,11 +331,16 @@ class Zernike(AbstractAberrations):
         return Zernike(self.coefficients * keep, noll=self.noll)
 
     def beyond_seidel_degree(self):
-        # Any nonzero term of radial order 5 or more (degree n in the pupil coordinates).
+        # Terms of radial order 5 or more (degree n in the pupil coordinates) of more than
+        # 1e-6 of the wavefront's RMS (piston and tilt aside; the basis is orthonormal): a fit
+        # of a Seidel wavefront (``zernike_fit``) leaves rounding there.
         high = [i for i, j in enumerate(self.noll) if noll_to_nm(j)[0] > 4]
         if not high:
             return False
-        return jnp.any(self.coefficients[np.asarray(high)] != 0)
+        rest = [i for i, j in enumerate(self.noll) if j > 3]
+        c = self.coefficients
+        return jnp.sum(jnp.square(c[np.asarray(high)])) > 1e-12 * jnp.sum(
+            jnp.square(c[np.asarray(rest)]))
 
     def seidel_like_terms(self) -> list:
         """The wavefront, less piston and tilt, as a list of terms ``f(x, y)`` in the shapes
