@@ -16,8 +16,9 @@ reference's own uncertainty):
 Usage (from the repository root; about 15 s a design on 2 cores)::
 
     .venv/bin/python benchmarks/zernike_designs.py [--designs 20] [--noll 22 37] [--seed 1]
+        [--preset default|high]
 
-Writes ``results/zernike_designs.json`` and ``.md``.
+Writes ``results/zernike_designs.json`` and ``.md`` (``zernike_designs_high`` for ``"high"``).
 """
 
 from __future__ import annotations
@@ -50,20 +51,21 @@ REFERENCES = (
 )
 
 
-def _default(ab, u, noise, balanced=True):
-    """The default's value, plan index and warnings for a concrete design (as ``jmse``
-    calls it; ``balanced=False``: without the balanced grid, the tiers by strength alone)."""
-    saved = jj.PRESETS["default"]["balanced"]
+def _default(ab, u, noise, balanced=True, preset="default"):
+    """The preset's value, plan index and warnings for a concrete design (as ``jmse``
+    calls it; ``balanced=False``: without the balanced grid, the tiers by strength alone,
+    or ``"high"``'s own and steep grids)."""
+    saved = jj.PRESETS[preset]["balanced"]
     if not balanced:
-        jj.PRESETS["default"]["balanced"] = None
+        jj.PRESETS[preset]["balanced"] = None
     try:
         static, inputs = _merit._prepare((ab, FIELD, u, SIGNAL, jj.WhiteNoise(noise)),
-                                         jj.jmse_options())
+                                         jj.jmse_options(preset))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             value, index, _, _ = _merit._concrete_merit(static, inputs, warn=True)
     finally:
-        jj.PRESETS["default"]["balanced"] = saved
+        jj.PRESETS[preset]["balanced"] = saved
     return float(value), int(index), [str(w.message)[:60] for w in caught]
 
 
@@ -73,8 +75,15 @@ def main(argv=None) -> None:
     parser.add_argument("--noll", type=int, nargs="+", default=[22, 37],
                         help="highest Noll index of each range (from 4)")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--name", default="zernike_designs")
+    parser.add_argument("--preset", default="default", choices=("default", "high"))
+    parser.add_argument("--name", default=None, help="default: zernike_designs[_high]")
     args = parser.parse_args(argv)
+    name = args.name or ("zernike_designs" if args.preset == "default"
+                         else f"zernike_designs_{args.preset}")
+    balanced_index = (len(jj.DEFAULT_TIERS) if args.preset == "default"
+                      else _merit._n_strength_plans(_merit._prepare(
+                          (jj.Zernike([1.0], noll=(16,)), FIELD, 0.5, SIGNAL, jj.WhiteNoise(1e-3)),
+                          jj.jmse_options(args.preset))[0]))
     machine = common.machine_info()
     references = [jax.jit(lambda ab, u, noise, grid=grid: jj.jmse(
         ab, FIELD, u, SIGNAL, jj.WhiteNoise(noise), **grid)) for grid in REFERENCES]
@@ -93,13 +102,13 @@ def main(argv=None) -> None:
             ab = jj.Zernike(c * scale, noll=noll)
             strength = float(jj.aberration_strength(ab, FIELD, u))
             coarse, fine = (float(f(ab, u, noise)) for f in references)
-            value, index, warned = _default(ab, u, noise)
-            tiers, tier, _ = _default(ab, u, noise, balanced=False)
+            value, index, warned = _default(ab, u, noise, preset=args.preset)
+            tiers, tier, _ = _default(ab, u, noise, balanced=False, preset=args.preset)
             row = dict(
                 noll=top, coefficients=(c * scale).tolist(), u=u, noise=noise,
                 strength=strength, slope=strength / min(math.sqrt(2.0) * u, 1.0),
                 cancellation=float(_merit._cancellation_jit(ab, FIELD, u)),
-                balanced=index == len(jj.DEFAULT_TIERS), tier=tier, warned=warned,
+                balanced=index == balanced_index, tier=tier, warned=warned,
                 reference=fine, convergence=coarse / fine - 1.0,
                 default=value / fine - 1.0, tiers=tiers / fine - 1.0)
             rows.append(row)
@@ -116,8 +125,9 @@ def main(argv=None) -> None:
              "to an aberration_strength drawn from 2 to 20; u 0.2, 0.5 or 0.85; noise 1e-3 or "
              "1e-4; MarkovSignal(1, 5). Reference: the polar grid "
              f"{REFERENCES[1]}; `reference~`: its difference from {REFERENCES[0]}. "
-             "`default`: as a user calls it; `tiers`: the tiers by strength alone (the "
-             f"balanced grid off). {seconds:.0f} s in all.", "",
+             f"`default`: the preset `{args.preset}` as a user calls it; `tiers`: that preset "
+             "with its balanced grid off (the default's tiers by strength alone; `high`'s own "
+             f"and steep grids). {seconds:.0f} s in all.", "",
              "| Noll | designs | to the balanced grid | warned | default > 1e-4 | default "
              "worst | tiers > 1e-4 | tiers worst | reference~ worst |",
              "|---|---|---|---|---|---|---|---|---|"]
@@ -141,7 +151,7 @@ def main(argv=None) -> None:
                      f"{r['tiers']:+.1e} ({r['tier']}) | {r['convergence']:+.1e} |")
     for line in lines[6:6 + len(args.noll)]:
         print(line)
-    common.write_report(args.name, dict(machine=machine, designs=rows), lines)
+    common.write_report(name, dict(machine=machine, preset=args.preset, designs=rows), lines)
 
 
 if __name__ == "__main__":
