@@ -229,14 +229,29 @@ def zernike_polynomial(j: int, x, y):
     radial = jnp.zeros_like(rho2)
     for c in reversed(_radial_coefficients(n, m)):
         radial = radial * rho2 + c
-    # rho^|m| e^{i |m| theta} = (y + i x)^|m|, built without dividing by rho.
-    re, im = jnp.ones_like(rho2), jnp.zeros_like(rho2)
-    for _ in range(abs(m)):
-        re, im = re * y - im * x, re * x + im * y
+    re, im = _angular_power(abs(m), x, y)
     if m == 0:
         return math.sqrt(n + 1) * radial
     angular = re if m > 0 else im
     return math.sqrt(2 * (n + 1)) * radial * angular
+
+
+def _angular_power(m: int, x, y):
+    """``rho^m e^{i m theta} = (y + i x)^m`` (``theta`` from +y) as (real, imaginary), built
+    without dividing by ``rho``."""
+    re, im = jnp.ones_like(x * y), jnp.zeros_like(x * y)
+    for _ in range(m):
+        re, im = re * y - im * x, re * x + im * y
+    return re, im
+
+
+@functools.cache
+def _split_by_order(noll: tuple[int, ...]):
+    """Positions in ``noll`` of the terms of Seidel's degree (radial order <= 4) and of the
+    higher ones."""
+    low = tuple(i for i, j in enumerate(noll) if noll_to_nm(j)[0] <= 4)
+    high = tuple(i for i, j in enumerate(noll) if noll_to_nm(j)[0] > 4)
+    return low, high
 
 
 def noll_indices(noll) -> tuple[int, ...]:
@@ -334,7 +349,7 @@ class Zernike(AbstractAberrations):
         # Terms of radial order 5 or more (degree n in the pupil coordinates) of more than
         # 1e-6 of the wavefront's RMS (piston and tilt aside; the basis is orthonormal): a fit
         # of a Seidel wavefront (``zernike_fit``) leaves rounding there.
-        high = [i for i, j in enumerate(self.noll) if noll_to_nm(j)[0] > 4]
+        high = _split_by_order(self.noll)[1]
         if not high:
             return False
         rest = [i for i, j in enumerate(self.noll) if j > 3]
@@ -360,8 +375,7 @@ class Zernike(AbstractAberrations):
         along ``y``, give Seidel's terms exactly. Each polynomial of higher order is a term
         of its own (split into powers of ``rho`` they would cancel by construction: 10 to 30
         times on random designs of Noll 4-37, against at most 7 for Seidel's terms)."""
-        low = [i for i, j in enumerate(self.noll) if noll_to_nm(j)[0] <= 4]
-        high = [i for i, j in enumerate(self.noll) if noll_to_nm(j)[0] > 4]
+        low, high = _split_by_order(self.noll)
         c = self.coefficients[np.asarray(low, dtype=int)]
         groups = {key: (jnp.dot(w[0], c), jnp.dot(w[1], c))
                   for key, w in _seidel_like_groups(tuple(self.noll[i] for i in low))}
@@ -406,11 +420,8 @@ def _seidel_like_groups(noll: tuple[int, ...]):
 def _seidel_like_term(m, power, a, b, x, y):
     """``rho^power (a cos m theta + b sin m theta)`` (``theta`` from +y), less its best-fit
     tilt (``4 / (power + 3)`` of ``rho cos theta``) when ``m = 1``."""
-    rho2 = x * x + y * y
-    re, im = jnp.ones_like(rho2), jnp.zeros_like(rho2)
-    for _ in range(m):  # rho^m e^{i m theta} = (y + i x)^m
-        re, im = re * y - im * x, re * x + im * y
-    term = rho2 ** ((power - m) // 2) * (a * re + b * im)
+    re, im = _angular_power(m, x, y)
+    term = (x * x + y * y) ** ((power - m) // 2) * (a * re + b * im)
     if m == 1:
         term = term - (4.0 / (power + 3)) * (a * y + b * x)
     return term
