@@ -62,6 +62,7 @@ __all__ = [
     "CHECKED_CANCELLATION",
     "CHECKED_SLOPE",
     "CHECKED_STRENGTH",
+    "DEGREE_OVERLAP",
     "HIGH_BALANCED_GRID",
     "HIGH_RAY_GRID",
     "HIGH_STEEP_GRID",
@@ -353,6 +354,19 @@ HIGH_STEEP_GRID = dict(nodes=(128, 64), se_nodes=(6400, 960), overlap_nodes=(80,
 #: defocus there 5.1e-1); with these counts none, worst 7.0e-5, the default's errors on
 #: every one of them (session 65). About 60 ms a design on 2 cores (was about 15).
 HIGH_RAY_GRID = dict(nodes=(256, 48), se_nodes=(4800, 960), overlap_nodes=(128, 96))
+#: The overlap rule that replaces the balanced grid's (``BALANCED_GRID``,
+#: ``HIGH_BALANCED_GRID``) in programs for designs of higher degree than Seidel's
+#: (``beyond_seidel_degree``): their balanced plan. On defocus with ``Z28`` (``rho^6 cos 6
+#: theta``) at u = 0.3, slope 46, which cancels nothing, the balanced grid's rule (96, 96)
+#: floor 64 was 3.1e-3 off and the steep tier's (64, 64) 1.1e-3, where more radial or
+#: angular OTF nodes or fine nodes did not help; the order across the chords binds (96:
+#: 6.0e-4, 112: 5.5e-6, 128: 3.4e-6), the order along them and the floor hardly do ((128,
+#: 96) floor 96: 4.0e-6; floor 64: 1.4e-5). On the 77 random Zernike designs of
+#: ``benchmarks/zernike_routes.py`` (session 67) that take the balanced plan up to
+#: ``CHECKED_SLOPE`` this rule, (128, 128) floor 128 and (128, 96) floor 128 all leave the
+#: same worst error (1.4e-5, a design whose references differ by 1.1e-6); it costs about
+#: 0.7x the first of those (0.87 against 1.2 s a value, Noll 4-45, 2 cores).
+DEGREE_OVERLAP = dict(overlap_nodes=(128, 96), overlap_floor=96)
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
@@ -1530,7 +1544,10 @@ def jmse(
         ``BALANCED_CANCELLATION``) takes a balanced tier of its own (``BALANCED_GRID``,
         about 0.2 s a value; ``"high"`` has one too, ``HIGH_BALANCED_GRID``, about
         0.3 s, and a steep grid past ``STEEP_SLOPE``, ``HIGH_STEEP_GRID``, and finer
-        counts along its one ray, ``HIGH_RAY_GRID``). The two weakest tiers first try a
+        counts along its one ray, ``HIGH_RAY_GRID``). A design of higher degree than
+        Seidel's (``beyond_seidel_degree``: a Zernike term of radial order 5 or more) takes
+        the steep tier, or if its terms cancel or it is steeper than ``STEEP_SLOPE`` the
+        balanced plan with the overlap rule ``DEGREE_OVERLAP``. The two weakest tiers first try a
         cheaper grid and keep its value when a coarse check grid (computed in float32)
         agrees with it to 1e-5 and its own interpolation-error estimate is below 1e-5
         (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the band reaches
@@ -1719,10 +1736,11 @@ def _route(aberrations, field, u, signal, noise, **options):
                 path=path, value=value)
 
 
-def _base_plans(static):
+def _base_plans(static, aberrations=None):
     """The plans of ``static``: the tiers' (or the one fixed grid and, when the preset has
     one, its steep grid, ``HIGH_STEEP_GRID``), then the balanced grid when there is one
-    (``BALANCED_GRID``, ``HIGH_BALANCED_GRID``)."""
+    (``BALANCED_GRID``, ``HIGH_BALANCED_GRID``), with the overlap rule ``DEGREE_OVERLAP``
+    when ``aberrations`` can be of higher degree than Seidel's (``_degree_program``)."""
     options, tiers, _, _, balanced, steep, _ = static.value
     if tiers is not None:
         plans = _tier_plans(options, tiers)
@@ -1731,8 +1749,18 @@ def _base_plans(static):
     else:
         plans = ((options, None),)
     if balanced is not None:
+        if _degree_program(aberrations):
+            balanced = {**balanced, **DEGREE_OVERLAP}
         plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
     return plans
+
+
+def _degree_program(aberrations):
+    """Whether designs of this model and structure can be of higher degree than Seidel's
+    (``beyond_seidel_degree`` not statically False: a Zernike design with terms of radial
+    order 5 or more, a model of unknown degree), so that the balanced plan takes
+    ``DEGREE_OVERLAP``."""
+    return aberrations is not None and aberrations.beyond_seidel_degree() is not False
 
 
 def _tier_plans_of(static, plans):
@@ -1746,11 +1774,17 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
     """``(index, tier, cancellation)``: the plan (of ``_base_plans``) this design takes, its
     tier by ``aberration_strength`` alone (``_tier_index``), which picks its one-ray plan,
     and its ``_cancellation`` (all traceable). A design whose terms cancel (``_balancing``)
-    takes the balanced tier, and so does one of higher degree than Seidel's wavefronts
-    (``beyond_seidel_degree``, e.g. a Zernike term of radial order 5 or more) from
-    ``CANCELLING_STRENGTH``: the tiers were calibrated on Seidel designs only, and on random
-    Zernike designs of Noll 4-22 and 4-37 they were up to 2.0e-3 off where the balanced grid
-    held them within 1.4e-5 (``benchmarks/zernike_designs.py``). The cancellation is
+    takes the balanced tier. One of higher degree than Seidel's wavefronts
+    (``beyond_seidel_degree``, e.g. a Zernike term of radial order 5 or more) takes, from
+    ``CANCELLING_STRENGTH``, the default's steep tier if it does not cancel and is no
+    steeper than ``STEEP_SLOPE``, else the balanced tier (``"high"``: its balanced tier),
+    whose grid then has the overlap rule ``DEGREE_OVERLAP`` (``_base_plans``). The tiers
+    were calibrated on Seidel designs only; on random Zernike designs of Noll 4-22 to 4-45
+    (``benchmarks/zernike_routes.py``, session 67) the tiers by strength were up to 5.0e-3
+    off at slope 24, the steep tier's grid held those that do not cancel within 8.7e-6 up
+    to ``STEEP_SLOPE`` (at 0.4x the balanced grid's time) but not past it (1.1e-3 at slope
+    46), and the balanced grid needed ``DEGREE_OVERLAP`` (3.1e-3 off at slope 46 without
+    it). The cancellation is
     computed only where it can matter, with the balanced tier or ``cancelling`` (for the
     warnings) and from ``CANCELLING_STRENGTH`` (most designs are weaker than that); elsewhere
     it is 1."""
@@ -1776,10 +1810,17 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
     if balanced is None:
         return tier, tier, cancellation
     balancing = _balancing(strength, cancellation)
+    index = tier
     beyond = aberrations.beyond_seidel_degree()
     if beyond is not False:  # the tiers were calibrated on Seidel's degree
-        balancing = balancing | ((strength >= CANCELLING_STRENGTH) & beyond)
-    index = jnp.where(balancing, _n_strength_plans(static), tier)
+        beyond = (strength >= CANCELLING_STRENGTH) & beyond
+        if tiers is not None:
+            # The default's steep tier up to STEEP_SLOPE, the balanced grid past it.
+            within = ~_steep(strength, jax.lax.stop_gradient(u))
+            index = jnp.where(beyond & within, len(tiers) - 1, index)
+            beyond = beyond & ~within
+        balancing = balancing | beyond
+    index = jnp.where(balancing, _n_strength_plans(static), index)
     return index.astype(jnp.int32), tier, cancellation
 
 
@@ -1806,7 +1847,7 @@ def _plans_and_index(static, aberrations, field, u):
     derivatives in the directions that break the symmetry: ``_switched_merit``'s derivative
     rule then takes the gradient from the design's own tier (``_switched_merit_jvp``).
     """
-    plans = _base_plans(static)
+    plans = _base_plans(static, aberrations)
     index, by_strength, _ = _tier_of(static, aberrations, field, u)
     tier = index
     # A rotationally symmetric design (any design on the axis) is integrated along one ray:
@@ -1974,7 +2015,7 @@ def _concrete_merit(static, inputs, warn=False):
     ``warn``: a ``UserWarning`` when the design is stronger than the presets were checked at
     (``CHECKED_STRENGTH``)."""
     dtype = static.value[3]
-    plans = _base_plans(static)
+    plans = _base_plans(static, inputs[0])
     index, by_strength, symmetric, strength, cancellation = (
         x.item() for x in _concrete_choice(static, *inputs[:3]))
     strong, steep, cancelling, slope = _beyond_checked(

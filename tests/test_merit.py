@@ -591,13 +591,16 @@ def test_zernike_astigmatism_takes_the_larger_of_its_two_seidel_forms():
     assert zernike == pytest.approx(1.4, rel=1e-9)
 
 
-def test_designs_beyond_seidel_degree_take_the_balanced_grid():
+def test_designs_beyond_seidel_degree_take_the_steep_or_the_balanced_grid():
     """The tiers were calibrated on Seidel designs (degree 4). On random Zernike designs of
-    Noll 4-22 and 4-37 they were up to 2.0e-3 off (``benchmarks/zernike_designs.py``), so a
-    design with a nonzero term of radial order 5 or more takes the balanced grid from a
-    strength of 2.5, whatever its cancellation. That worst design, within 1e-5 of a finer
-    polar grid (two such grids agree to 1.4e-8), where its tier (2) is 2e-3 off; and the
-    route of secondary coma (Noll 16) alone, which cancels nothing."""
+    Noll 4-22 to 4-45 they were up to 5e-3 off (``benchmarks/zernike_designs.py``,
+    ``zernike_routes.py``), so a design with a nonzero term of radial order 5 or more takes,
+    from a strength of 2.5, the steep tier's grid up to ``STEEP_SLOPE`` and the balanced
+    grid past it (or when its terms cancel). The worst design of ``zernike_designs.py``
+    (it cancels 2.5 times) within 1e-5 of a finer polar grid (two such grids agree to
+    1.4e-8), where its tier (2) is 2e-3 off; defocus with ``Z27`` (``rho^6 sin 6 theta``),
+    which cancels nothing, within 1e-5 in the steep tier where its tier (3) is 5e-3 off; and
+    the routes of secondary coma (Noll 16) alone."""
     from jmse_jax import _merit
 
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
@@ -621,13 +624,71 @@ def test_designs_beyond_seidel_degree_take_the_balanced_grid():
             static, *inputs[:3])
         return int(index), int(by_strength), float(strength), float(cancellation)
 
+    # A design that cancels nothing: the steep tier, within 1e-5, where its tier is 5e-3 off.
+    ab = jj.Zernike([-0.49136511167521296, 0.9256500375393379], noll=(4, 27))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        route = _route(ab, 0.5, 0.7, signal, noise)
+    steep = len(jj.DEFAULT_TIERS) - 1
+    assert route["tier"] == steep and not route["balanced"]
+    reference = float(jj.jmse(ab, 0.5, 0.7, signal, noise, nodes=(160, 80),
+                              se_nodes=(6400, 512), overlap_nodes=(128, 128),
+                              overlap_floor=128, peaks=True))
+    assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
+    tier = float(jj.jmse(ab, 0.5, 0.7, signal, noise, **jj.DEFAULT_TIERS[3][2]))
+    assert abs(tier / reference - 1.0) > 3e-3
+
     balanced = len(jj.DEFAULT_TIERS)
-    index, by_strength, strength, cancellation = plan(jj.Zernike([2.0], noll=(16,)), 0.5)
-    assert index == balanced and by_strength < balanced
-    assert strength > 2.5 and cancellation == pytest.approx(1.0)
+    index, by_strength, strength, cancellation = plan(jj.Zernike([0.24], noll=(16,)), 0.5)
+    assert index == steep and by_strength < steep
+    assert 2.5 < strength < _merit.STEEP_SLOPE * math.sqrt(2.0) * 0.5
+    assert cancellation == pytest.approx(1.0)
+    # Past STEEP_SLOPE (slope 50: the term at u = 0.2, 3.5 times larger), the balanced grid.
+    index, by_strength, strength, _ = plan(jj.Zernike([0.85], noll=(16,)), 0.2)
+    assert index == balanced and by_strength == steep
+    assert _merit.STEEP_SLOPE * math.sqrt(2.0) * 0.2 < strength < _merit.CHECKED_SLOPE * 0.28
     # Below the strength bound, or with the high-order term zero, the tiers by strength.
-    assert plan(jj.Zernike([0.02], noll=(16,)), 0.5)[0] < balanced
-    assert plan(jj.Zernike([2.0, 0.0], noll=(8, 16)), 0.5)[0] < balanced
+    assert plan(jj.Zernike([0.02], noll=(16,)), 0.5)[0] < steep
+    assert plan(jj.Zernike([0.24, 0.0], noll=(8, 16)), 0.5)[0] < steep
+
+
+def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_rule():
+    """Defocus with ``Z28`` (``rho^6 cos 6 theta``) at u = 0.3 (slope 46, past
+    ``STEEP_SLOPE``; it cancels nothing) takes the balanced plan, which in a program for
+    designs beyond Seidel's degree has the overlap rule ``DEGREE_OVERLAP``: within 1e-5 of
+    a finer polar grid (converged to 3e-7), where ``BALANCED_GRID`` itself is 3.1e-3 off
+    (``benchmarks/zernike_routes.py``). Programs for Seidel designs and for Zernike designs
+    of Seidel's degree keep ``BALANCED_GRID``."""
+    from jmse_jax import _merit
+
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
+    ab = jj.Zernike([0.8701630593005899, -1.770897977784089], noll=(4, 28))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        route = _route(ab, 0.5, 0.3, signal, noise)
+    assert route["balanced"]
+    reference = float(jj.jmse(ab, 0.5, 0.3, signal, noise, nodes=(160, 80),
+                              se_nodes=(6400, 512), overlap_nodes=(128, 128),
+                              overlap_floor=128, peaks=True))
+    assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
+    alone = float(jj.jmse(ab, 0.5, 0.3, signal, noise, **jj.BALANCED_GRID))
+    assert abs(alone / reference - 1.0) > 2e-3
+
+    def balanced_plan(design, preset="default"):
+        static, _ = _merit._prepare((design, 0.5, 0.3, signal, noise),
+                                    jj.jmse_options(preset))
+        return _merit._base_plans(static, design)[-1][0]
+
+    for design in (ab, jj.Zernike([0.1], noll=(16,))):
+        for preset in ("default", "high"):
+            options = balanced_plan(design, preset)
+            assert options["overlap_nodes"] == jj.DEGREE_OVERLAP["overlap_nodes"]
+            assert options["overlap_floor"] == jj.DEGREE_OVERLAP["overlap_floor"]
+    assert balanced_plan(ab, "high")["se_nodes"] == jj.HIGH_BALANCED_GRID["se_nodes"]
+    for design in (jj.Seidel(w020=1.0, w040=-0.5), jj.Zernike([0.5, 0.1], noll=(4, 11))):
+        options = balanced_plan(design)
+        assert options["overlap_nodes"] == jj.BALANCED_GRID["overlap_nodes"]
+        assert options["overlap_floor"] == jj.BALANCED_GRID["overlap_floor"]
 
 
 def test_terms_that_cancel_warn_off_the_axis_without_the_balanced_tier():
