@@ -591,6 +591,18 @@ def test_zernike_astigmatism_takes_the_larger_of_its_two_seidel_forms():
     assert zernike == pytest.approx(1.4, rel=1e-9)
 
 
+def _route_and_reference(ab, u, signal, noise):
+    """The default's route of a concrete design at field 0.5 (no warning allowed) and a
+    finer polar grid's value (converged to about 1e-6 or better on the designs here)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        route = _route(ab, 0.5, u, signal, noise)
+    reference = float(jj.jmse(ab, 0.5, u, signal, noise, nodes=(160, 80),
+                              se_nodes=(6400, 512), overlap_nodes=(128, 128),
+                              overlap_floor=128, peaks=True))
+    return route, reference
+
+
 def test_designs_beyond_seidel_degree_take_the_steep_or_the_balanced_grid():
     """The tiers were calibrated on Seidel designs (degree 4). On random Zernike designs of
     Noll 4-22 to 4-45 they were up to 5e-3 off (``benchmarks/zernike_designs.py``,
@@ -607,13 +619,8 @@ def test_designs_beyond_seidel_degree_take_the_steep_or_the_balanced_grid():
     ab = jj.Zernike([0.5748, 0.4421, -0.4164, -0.0005, 0.1932, 0.2031, 0.3799, 0.0834, -0.0308,
                      -0.0842, 0.3433, -0.732, -0.0361, 0.0086, -0.3708, 0.0866, -0.1694, 0.2244,
                      -0.0272], noll=tuple(range(4, 23)))
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        route = _route(ab, 0.5, 0.2, signal, noise)
+    route, reference = _route_and_reference(ab, 0.2, signal, noise)
     assert route["balanced"]
-    reference = float(jj.jmse(ab, 0.5, 0.2, signal, noise, nodes=(160, 80),
-                              se_nodes=(6400, 512), overlap_nodes=(128, 128),
-                              overlap_floor=128, peaks=True))
     assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
     tier = float(jj.jmse(ab, 0.5, 0.2, signal, noise, **jj.DEFAULT_TIERS[2][2]))
     assert abs(tier / reference - 1.0) > 1e-3
@@ -626,14 +633,9 @@ def test_designs_beyond_seidel_degree_take_the_steep_or_the_balanced_grid():
 
     # A design that cancels nothing: the steep tier, within 1e-5, where its tier is 5e-3 off.
     ab = jj.Zernike([-0.49136511167521296, 0.9256500375393379], noll=(4, 27))
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        route = _route(ab, 0.5, 0.7, signal, noise)
+    route, reference = _route_and_reference(ab, 0.7, signal, noise)
     steep = len(jj.DEFAULT_TIERS) - 1
     assert route["tier"] == steep and not route["balanced"]
-    reference = float(jj.jmse(ab, 0.5, 0.7, signal, noise, nodes=(160, 80),
-                              se_nodes=(6400, 512), overlap_nodes=(128, 128),
-                              overlap_floor=128, peaks=True))
     assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
     tier = float(jj.jmse(ab, 0.5, 0.7, signal, noise, **jj.DEFAULT_TIERS[3][2]))
     assert abs(tier / reference - 1.0) > 3e-3
@@ -663,13 +665,8 @@ def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_ru
 
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
     ab = jj.Zernike([0.8701630593005899, -1.770897977784089], noll=(4, 28))
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        route = _route(ab, 0.5, 0.3, signal, noise)
+    route, reference = _route_and_reference(ab, 0.3, signal, noise)
     assert route["balanced"]
-    reference = float(jj.jmse(ab, 0.5, 0.3, signal, noise, nodes=(160, 80),
-                              se_nodes=(6400, 512), overlap_nodes=(128, 128),
-                              overlap_floor=128, peaks=True))
     assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
     alone = float(jj.jmse(ab, 0.5, 0.3, signal, noise, **jj.BALANCED_GRID))
     assert abs(alone / reference - 1.0) > 2e-3
