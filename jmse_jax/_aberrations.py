@@ -237,13 +237,22 @@ def zernike_polynomial(j: int, x, y):
     return math.sqrt(2 * (n + 1)) * radial * angular
 
 
-def _angular_power(m: int, x, y):
-    """``rho^m e^{i m theta} = (y + i x)^m`` (``theta`` from +y) as (real, imaginary), built
-    without dividing by ``rho``."""
+def _angular_powers(orders, x, y):
+    """``rho^m e^{i m theta} = (y + i x)^m`` (``theta`` from +y) as (real, imaginary) for each
+    ``m`` of the rising ``orders``, each built from the one before, without dividing by
+    ``rho``."""
     re, im = jnp.ones_like(x * y), jnp.zeros_like(x * y)
-    for _ in range(m):
-        re, im = re * y - im * x, re * x + im * y
-    return re, im
+    degree = 0
+    for m in orders:
+        for _ in range(m - degree):
+            re, im = re * y - im * x, re * x + im * y
+        degree = m
+        yield re, im
+
+
+def _angular_power(m: int, x, y):
+    """``(y + i x)^m`` as (real, imaginary) (``_angular_powers``)."""
+    return next(_angular_powers((m,), x, y))
 
 
 @functools.cache
@@ -317,13 +326,10 @@ class Zernike(AbstractAberrations):
         del field
         c = self.coefficients
         rho2 = x * x + y * y
-        re, im = jnp.ones_like(x * y), jnp.zeros_like(x * y)
         total = jnp.zeros_like(x * y * c[0])
-        degree = 0
-        for m, weights, parts in _grouped_weights(self.noll):
-            for _ in range(m - degree):
-                re, im = re * y - im * x, re * x + im * y
-            degree = m
+        groups = _grouped_weights(self.noll)
+        powers = _angular_powers([m for m, _, _ in groups], x, y)
+        for (_, weights, parts), (re, im) in zip(groups, powers, strict=True):
             amplitudes = jnp.asarray(weights, c.dtype) @ c  # (powers of rho^2, cos / sin)
             for part, angular in zip((0, 1), (re, im), strict=True):
                 if part not in parts:

@@ -1811,14 +1811,13 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
         return tier, tier, cancellation
     balancing = _balancing(strength, cancellation)
     index = tier
-    beyond = aberrations.beyond_seidel_degree()
-    if beyond is not False:  # the tiers were calibrated on Seidel's degree
-        beyond = (strength >= CANCELLING_STRENGTH) & beyond
+    if _degree_program(aberrations):  # the tiers were calibrated on Seidel's degree
+        beyond = (strength >= CANCELLING_STRENGTH) & aberrations.beyond_seidel_degree()
         if tiers is not None:
-            # The default's steep tier up to STEEP_SLOPE, the balanced grid past it.
-            within = ~_steep(strength, jax.lax.stop_gradient(u))
-            index = jnp.where(beyond & within, len(tiers) - 1, index)
-            beyond = beyond & ~within
+            # The default's steep tier up to STEEP_SLOPE, the balanced plan past it.
+            steep_tier = beyond & ~_steep(strength, jax.lax.stop_gradient(u))
+            index = jnp.where(steep_tier, len(tiers) - 1, index)
+            beyond = beyond & ~steep_tier
         balancing = balancing | beyond
     index = jnp.where(balancing, _n_strength_plans(static), index)
     return index.astype(jnp.int32), tier, cancellation
