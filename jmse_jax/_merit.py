@@ -63,6 +63,7 @@ __all__ = [
     "CHECKED_SLOPE",
     "CHECKED_STRENGTH",
     "DEGREE_OVERLAP",
+    "HIGH_DEGREE_NODES",
     "HIGH_BALANCED_GRID",
     "HIGH_RAY_GRID",
     "HIGH_STEEP_GRID",
@@ -367,6 +368,15 @@ HIGH_RAY_GRID = dict(nodes=(256, 48), se_nodes=(4800, 960), overlap_nodes=(128, 
 #: same worst error (1.4e-5, a design whose references differ by 1.1e-6); it costs about
 #: 0.7x the first of those (0.87 against 1.2 s a value, Noll 4-45, 2 cores).
 DEGREE_OVERLAP = dict(overlap_nodes=(128, 96), overlap_floor=96)
+#: The OTF nodes (radial, angular) of ``"high"``'s balanced plan in programs for designs of
+#: higher degree than Seidel's (with ``DEGREE_OVERLAP``): ``HIGH_BALANCED_GRID``'s 48
+#: angular nodes bind on such designs at small u. On the 175 random Zernike designs of
+#: ``benchmarks/zernike_high_routes.py`` (session 68), up to ``CHECKED_SLOPE``, its grid with
+#: ``DEGREE_OVERLAP`` was up to 2.3e-5 off (a Noll 4-22 design at u = 0.2, slope 55, whose
+#: two references differ by 1.1e-6), with these nodes 3.9e-6 (two more than 1e-6, where
+#: the references are not resolved), at about 1.3x the time (``HIGH_STEEP_GRID`` with
+#: ``DEGREE_OVERLAP``, about as costly, 4.3e-6).
+HIGH_DEGREE_NODES = (160, 64)
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
@@ -1547,9 +1557,11 @@ def jmse(
         counts along its one ray, ``HIGH_RAY_GRID``). A design of higher degree than
         Seidel's (``beyond_seidel_degree``: a Zernike term of radial order 5 or more) takes
         the steep tier, or if its terms cancel or it is steeper than ``STEEP_SLOPE`` the
-        balanced plan with the overlap rule ``DEGREE_OVERLAP``. The two weakest tiers first try a
-        cheaper grid and keep its value when a coarse check grid (computed in float32)
-        agrees with it to 1e-5 and its own interpolation-error estimate is below 1e-5
+        balanced plan with the overlap rule ``DEGREE_OVERLAP`` (``"high"``: its balanced
+        plan, with that rule and the OTF nodes ``HIGH_DEGREE_NODES``). The two weakest
+        tiers first try a cheaper grid and keep its value when a coarse check grid
+        (computed in float32) agrees with it to 1e-5 and its own interpolation-error
+        estimate is below 1e-5
         (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the band reaches
         the cutoff): about half of the middle tier's designs and nine in ten of the first's,
         the paper's Fig. 1 point among them, then cost that grid, its estimate and the check
@@ -1740,7 +1752,8 @@ def _base_plans(static, aberrations=None):
     """The plans of ``static``: the tiers' (or the one fixed grid and, when the preset has
     one, its steep grid, ``HIGH_STEEP_GRID``), then the balanced grid when there is one
     (``BALANCED_GRID``, ``HIGH_BALANCED_GRID``), with the overlap rule ``DEGREE_OVERLAP``
-    when ``aberrations`` can be of higher degree than Seidel's (``_degree_program``)."""
+    (and in ``"high"`` the OTF nodes ``HIGH_DEGREE_NODES``) when ``aberrations`` can be of
+    higher degree than Seidel's (``_degree_program``)."""
     options, tiers, _, _, balanced, steep, _ = static.value
     if tiers is not None:
         plans = _tier_plans(options, tiers)
@@ -1751,6 +1764,8 @@ def _base_plans(static, aberrations=None):
     if balanced is not None:
         if _degree_program(aberrations):
             balanced = {**balanced, **DEGREE_OVERLAP}
+            if tiers is None and steep is not None:  # "high"'s balanced plan
+                balanced["nodes"] = HIGH_DEGREE_NODES
         plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
     return plans
 
@@ -1778,7 +1793,8 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
     (``beyond_seidel_degree``, e.g. a Zernike term of radial order 5 or more) takes, from
     ``CANCELLING_STRENGTH``, the default's steep tier if it does not cancel and is no
     steeper than ``STEEP_SLOPE``, else the balanced tier (``"high"``: its balanced tier),
-    whose grid then has the overlap rule ``DEGREE_OVERLAP`` (``_base_plans``). The tiers
+    whose grid then has the overlap rule ``DEGREE_OVERLAP`` (``"high"``'s also the OTF
+    nodes ``HIGH_DEGREE_NODES``; ``_base_plans``). The tiers
     were calibrated on Seidel designs only; on random Zernike designs of Noll 4-22 to 4-45
     (``benchmarks/zernike_routes.py``, session 67) the tiers by strength were up to 5.0e-3
     off at slope 24, the steep tier's grid held those that do not cancel within 8.7e-6 up

@@ -688,6 +688,52 @@ def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_ru
         assert options["overlap_floor"] == jj.BALANCED_GRID["overlap_floor"]
 
 
+def test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes():
+    """``"high"``'s balanced plan, which a design beyond Seidel's degree takes from a
+    strength of 2.5, has in a program for such designs the OTF nodes ``HIGH_DEGREE_NODES``
+    with ``DEGREE_OVERLAP``. A random Noll 4-22 design at u = 0.2 (slope 55, cancellation
+    3.6) is within 3e-6 of a finer polar grid (whose difference from a finer one still is
+    1.1e-6), where ``HIGH_BALANCED_GRID`` with that rule, its 48 angular OTF nodes, is
+    2.3e-5 off (``benchmarks/zernike_high_routes.py``). A Seidel program's balanced plan
+    keeps ``HIGH_BALANCED_GRID``'s nodes, and the default's ``BALANCED_GRID``'s."""
+    from jmse_jax import _merit
+
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
+    ab = jj.Zernike([0.36443759675008447, 0.2420869269465188, -0.9937494292524693,
+                     0.47622764766103204, -0.33741398227225927, -0.6035140844382162,
+                     -0.5145916290332639, -0.1673877808993987, 0.6974610820877123,
+                     -0.5038348282375937, 0.06860854652113262, -0.9162717733690122,
+                     -0.0005372701854637292, 0.30844341855666246, -0.08114714231821417,
+                     -0.21579327600146167, 0.07938053560543282, 0.2400680988506334,
+                     0.1896291424206036], noll=tuple(range(4, 23)))
+
+    def plans(design, preset="high"):
+        static, inputs = _merit._prepare((design, 0.5, 0.2, signal, noise),
+                                         jj.jmse_options(preset))
+        return static, inputs, _merit._base_plans(static, design)
+
+    static, inputs, high_plans = plans(ab)
+    index, _, _, strength, _ = _merit._concrete_choice(static, *inputs[:3])
+    assert int(index) == len(high_plans) - 1
+    assert _merit.STEEP_SLOPE < float(strength) / (math.sqrt(2.0) * 0.2) < _merit.CHECKED_SLOPE
+    balanced = high_plans[-1][0]
+    assert balanced["nodes"] == jj.HIGH_DEGREE_NODES
+    assert balanced["overlap_nodes"] == jj.DEGREE_OVERLAP["overlap_nodes"]
+    assert plans(jj.Seidel(w020=1.0))[2][-1][0]["nodes"] == jj.HIGH_BALANCED_GRID["nodes"]
+    assert plans(ab, "default")[2][-1][0]["nodes"] == jj.BALANCED_GRID["nodes"]
+
+    reference = float(jj.jmse(ab, 0.5, 0.2, signal, noise, nodes=(160, 80),
+                              se_nodes=(6400, 512), overlap_nodes=(128, 128),
+                              overlap_floor=128, peaks=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        value = float(jj.jmse(ab, 0.5, 0.2, signal, noise, preset="high"))
+    assert value == pytest.approx(reference, rel=3e-6)
+    coarse = float(jj.jmse(ab, 0.5, 0.2, signal, noise,
+                           **{**jj.HIGH_BALANCED_GRID, **jj.DEGREE_OVERLAP}))
+    assert abs(coarse / reference - 1.0) > 1.5e-5
+
+
 def test_terms_that_cancel_warn_off_the_axis_without_the_balanced_tier():
     """Defocus set against spherical aberration a hair off the axis (``W = 10 rho^2 - 7
     rho^4``, cancellation 6, strength 5.7): such designs were up to 8e-2 off in the default's
