@@ -109,14 +109,11 @@ def _lines(report, load):
             lines.append(f"| {label} | " + " | ".join(common.fmt_seconds(float(np.median(
                 [r["high_seconds"][k] for r in group]))) for k in names) + " |")
     lines += ["", "Every design:", "",
-              "| set | family | Noll | u | noise | strength | slope | cancellation | "
-              + " | ".join(names) + " |", "|" + "---|" * (8 + len(names))]
+              f"| set | family | {routes.DESIGN_HEADER} | " + " | ".join(names) + " |",
+              "|" + "---|" * (8 + len(names))]
     for r in rows:
-        lines.append(
-            f"| {r['set']} | {r['family']} | 4-{max(r['noll'])} | {r['u']} | "
-            f"{r['noise']:.0e} | {r['strength']:.1f} | {r['slope']:.1f} | "
-            f"{r['cancellation']:.2f} | "
-            + " | ".join(f"{r['high'][k]:+.1e}" for k in names) + " |")
+        lines.append(f"| {r['set']} | {r['family']} | {routes.design_cells(r)} | "
+                     + " | ".join(f"{r['high'][k]:+.1e}" for k in names) + " |")
     for line in lines[6:8 + len(groups)]:
         print(line)
     return lines

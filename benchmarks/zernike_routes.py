@@ -205,6 +205,16 @@ def _route_now(row):
     return "steep"
 
 
+#: The columns that describe a design in the reports' tables (``design_cells``).
+DESIGN_HEADER = "Noll | u | noise | strength | slope | cancellation"
+
+
+def design_cells(row):
+    """A design's cells under ``DESIGN_HEADER`` (also ``zernike_high_routes.py``)."""
+    return (f"4-{max(row['noll'])} | {row['u']} | {row['noise']:.0e} | "
+            f"{row['strength']:.1f} | {row['slope']:.1f} | {row['cancellation']:.2f}")
+
+
 def _lines(report, load):
     rows = report["designs"]
     for r in rows:
@@ -264,12 +274,11 @@ def _lines(report, load):
                 common.fmt_seconds(float(np.median([r["seconds"][k] for r in group])))
                 if all(k in r["seconds"] for r in group) else "-" for k in names) + " |")
     lines += ["", "Every design:", "",
-              "| family | Noll | u | noise | strength | slope | cancellation | tier | "
-              + " | ".join(routes) + " |", "|" + "---|" * (8 + len(routes))]
+              f"| family | {DESIGN_HEADER} | tier | " + " | ".join(routes) + " |",
+              "|" + "---|" * (8 + len(routes))]
     for r in rows:
         lines.append(
-            f"| {r['family']} | 4-{max(r['noll'])} | {r['u']} | {r['noise']:.0e} | "
-            f"{r['strength']:.1f} | {r['slope']:.1f} | {r['cancellation']:.2f} | {r['tier']} | "
+            f"| {r['family']} | {design_cells(r)} | {r['tier']} | "
             + " | ".join(f"{r['errors'][k]:+.1e}" if k in r["errors"] else "-" for k in names)
             + f" | {r['now']:+.1e} |")
     for line in lines[6:8 + len(groups)]:
