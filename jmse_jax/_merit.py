@@ -63,8 +63,8 @@ __all__ = [
     "CHECKED_SLOPE",
     "CHECKED_STRENGTH",
     "DEGREE_OVERLAP",
-    "HIGH_DEGREE_NODES",
     "HIGH_BALANCED_GRID",
+    "HIGH_DEGREE_NODES",
     "HIGH_RAY_GRID",
     "HIGH_STEEP_GRID",
     "SEQUENTIAL_VMAP_BACKENDS",
@@ -365,7 +365,8 @@ HIGH_RAY_GRID = dict(nodes=(256, 48), se_nodes=(4800, 960), overlap_nodes=(128, 
 #: 96) floor 96: 4.0e-6; floor 64: 1.4e-5). On the 77 random Zernike designs of
 #: ``benchmarks/zernike_routes.py`` (session 67) that take the balanced plan up to
 #: ``CHECKED_SLOPE`` this rule, (128, 128) floor 128 and (128, 96) floor 128 all leave the
-#: same worst error (1.4e-5, a design whose references differ by 1.1e-6); it costs about
+#: same worst error (1.4e-5, a design whose references differ by 1.1e-6; session 68 found
+#: it bound by the grid's angular counts, 8.8e-6 with 64 angular OTF nodes); it costs about
 #: 0.7x the first of those (0.87 against 1.2 s a value, Noll 4-45, 2 cores).
 DEGREE_OVERLAP = dict(overlap_nodes=(128, 96), overlap_floor=96)
 #: The OTF nodes (radial, angular) of ``"high"``'s balanced plan in programs for designs of
@@ -1764,7 +1765,8 @@ def _base_plans(static, aberrations=None):
     if balanced is not None:
         if _degree_program(aberrations):
             balanced = {**balanced, **DEGREE_OVERLAP}
-            if tiers is None and steep is not None:  # "high"'s balanced plan
+            if tiers is None and steep is not None:
+                # A preset with a steep grid and no tiers ("high"): its own nodes.
                 balanced["nodes"] = HIGH_DEGREE_NODES
         plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
     return plans
@@ -1793,8 +1795,8 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
     (``beyond_seidel_degree``, e.g. a Zernike term of radial order 5 or more) takes, from
     ``CANCELLING_STRENGTH``, the default's steep tier if it does not cancel and is no
     steeper than ``STEEP_SLOPE``, else the balanced tier (``"high"``: its balanced tier),
-    whose grid then has the overlap rule ``DEGREE_OVERLAP`` (``"high"``'s also the OTF
-    nodes ``HIGH_DEGREE_NODES``; ``_base_plans``). The tiers
+    whose grid then has the overlap rule ``DEGREE_OVERLAP`` (in ``"high"`` the OTF nodes
+    ``HIGH_DEGREE_NODES`` too; ``_base_plans``). The tiers
     were calibrated on Seidel designs only; on random Zernike designs of Noll 4-22 to 4-45
     (``benchmarks/zernike_routes.py``, session 67) the tiers by strength were up to 5.0e-3
     off at slope 24, the steep tier's grid held those that do not cancel within 8.7e-6 up
