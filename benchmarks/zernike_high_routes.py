@@ -52,8 +52,7 @@ import zernike_routes as routes  # noqa: E402
 import jmse_jax as jj  # noqa: E402
 from jmse_jax import _merit  # noqa: E402
 
-_OWN = {k: jj.PRESETS["high"][k] for k in (
-    "quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes", "overlap_floor", "peaks")}
+_OWN = {k: jj.PRESETS["high"][k] for k in (*_merit._GRID_OPTIONS, "peaks")}
 #: ``"fast"``'s one grid (``--grids fast``), which it gives every design.
 _FAST = {k: jj.PRESETS["fast"][k] for k in _OWN}
 GRIDS = dict(

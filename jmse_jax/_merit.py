@@ -1764,10 +1764,8 @@ def _base_plans(static, aberrations=None):
         plans = ((options, None),)
     if balanced is not None:
         if _degree_program(aberrations):
-            balanced = {**balanced, **DEGREE_OVERLAP}
-            if tiers is None and steep is not None:
-                # A preset with a steep grid and no tiers ("high"): its own nodes.
-                balanced["nodes"] = HIGH_DEGREE_NODES
+            nodes = HIGH_DEGREE_NODES if balanced == HIGH_BALANCED_GRID else balanced["nodes"]
+            balanced = {**balanced, **DEGREE_OVERLAP, "nodes": nodes}
         plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
     return plans
 
@@ -1775,8 +1773,8 @@ def _base_plans(static, aberrations=None):
 def _degree_program(aberrations):
     """Whether designs of this model and structure can be of higher degree than Seidel's
     (``beyond_seidel_degree`` not statically False: a Zernike design with terms of radial
-    order 5 or more, a model of unknown degree), so that the balanced plan takes
-    ``DEGREE_OVERLAP``."""
+    order 5 or more, a model of unknown degree), so that ``_tier_of`` routes them and the
+    balanced plan takes ``DEGREE_OVERLAP`` (``_base_plans``)."""
     return aberrations is not None and aberrations.beyond_seidel_degree() is not False
 
 
