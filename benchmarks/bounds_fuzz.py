@@ -32,7 +32,7 @@ cancellation and peak ``S_x / S_n`` within the bounds the preset was checked at
 ``CHECKED_SNR_PEAKS``); the script asks the library which of them a design passes, without
 evaluating it.
 
-Usage (from the repository root; about 4 min on 2 cores with the defaults)::
+Usage (from the repository root; about 10 min on 2 cores with the defaults)::
 
     .venv/bin/python benchmarks/bounds_fuzz.py [--designs 150] [--seed 11]
         [--presets fast,default,high] [--dtypes float64,float32] [--family seidel]

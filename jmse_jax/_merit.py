@@ -793,30 +793,48 @@ def _fine_stage_jvp(coarse, fine, dtype, ridges, primals, tangents):
 _fine_stage.defjvp(_fine_stage_jvp, symbolic_zeros=True)
 
 
-def _band_integral(aberrations, field, u, signal, noise, options, dtype, mirror,
-                   estimate=False):
-    """``\\iint_band S_e`` over the folded first quadrant (``mirror``: the x-mirrored one);
-    with ``estimate``, also its ``_interpolation_estimate``."""
-    sign = -1.0 if mirror else 1.0
-    if options["quadrature"] == "polar":
-        coarse = polar_panels(u, *options["nodes"], dtype)
-        h = _polar_otf(aberrations, sign * coarse.nu_x, coarse.nu_y, field, options)
+def _band_integrals(aberrations, field, u, signal, noise, options, dtype, mirrors,
+                    estimate=False):
+    """``\\iint_band S_e`` over the folded first quadrant, one per entry of ``mirrors``
+    (True: the x-mirrored quadrant); with ``estimate``, each with its
+    ``_interpolation_estimate``.
+
+    The polar rule computes the OTF of both quadrants in one call of the overlap engine
+    (the nodes of the two stacked): a wavefront that is not even in x then traces and
+    compiles one OTF stage per panel instead of two, with the same values node by node."""
+    signs = jnp.asarray([-1.0 if m else 1.0 for m in mirrors], dtype)
+    if options["quadrature"] != "polar":
+        nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
+        out = []
+        for sign in signs:
+            h = _otf_at(aberrations, sign * nu_x, nu_y, field, options)
+            out.append(jnp.sum(w * error_spectral_density(h, signal(nu_x, nu_y),
+                                                          noise(nu_x, nu_y))))
+        return out
+    coarse = polar_panels(u, *options["nodes"], dtype)
+    if mirrors == (False,):  # the nodes as they are (an even wavefront's one quadrant)
+        h_all = [_polar_otf(aberrations, coarse.nu_x, coarse.nu_y, field, options)]
+    else:
+        shape = (len(mirrors),) + coarse.nu_x.shape
+        nu_x = signs.reshape((-1,) + (1,) * coarse.nu_x.ndim) * coarse.nu_x
+        h_all = _polar_otf(aberrations, nu_x, jnp.broadcast_to(coarse.nu_y, shape), field,
+                           options)
+    out = []
+    for h in h_all:
         if options["se_nodes"] is None:
             s_e = error_spectral_density(h, signal(coarse.nu_x, coarse.nu_y),
                                          noise(coarse.nu_x, coarse.nu_y))
             s_x_out = signal(coarse.outer_nu_x, coarse.outer_nu_y)  # H = 0 past the cutoff
-            return jnp.sum(coarse.weights * s_e) + jnp.sum(coarse.outer_weights * s_x_out)
+            out.append(jnp.sum(coarse.weights * s_e) + jnp.sum(coarse.outer_weights * s_x_out))
+            continue
         ridges = bool(options.get("peaks", False))
         total = _fine_stage(h, u, signal, noise, options["nodes"], options["se_nodes"], dtype,
                             ridges)
         if estimate:
-            return total, _interpolation_estimate(h, u, signal, noise, total, options, dtype,
-                                                  ridges)
-        return total
-    nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
-    h = _otf_at(aberrations, sign * nu_x, nu_y, field, options)
-    s_e = error_spectral_density(h, signal(nu_x, nu_y), noise(nu_x, nu_y))
-    return jnp.sum(w * s_e)
+            total = total, _interpolation_estimate(h, u, signal, noise, total, options, dtype,
+                                                   ridges)
+        out.append(total)
+    return out
 
 
 @jax.named_scope("interpolation_estimate")
@@ -1029,11 +1047,12 @@ def _merit_value(options, dtype, aberrations, field, u, signal, noise, estimate=
         raise ValueError("an estimated grid needs the polar rule with se_nodes")
     if options.get("_radial"):  # a plan for rotationally symmetric designs (see jmse)
         return _one_ray_merit(_Static((options, dtype)), (aberrations, field, u, signal, noise))
-    band = functools.partial(_band_integral, aberrations, field, u, signal, noise, options,
-                             dtype, estimate=estimate)
-    total = band(mirror=False)
+    mirrors = (False,) if aberrations.x_symmetric else (False, True)
+    halves = _band_integrals(aberrations, field, u, signal, noise, options, dtype, mirrors,
+                             estimate=estimate)
+    total = halves[0]
     if not aberrations.x_symmetric:
-        mirrored = band(mirror=True)
+        mirrored = halves[1]
         if estimate:
             return (0.5 * (total[0] + mirrored[0]) / (2.0 * math.pi),
                     jnp.maximum(total[1], mirrored[1]))
