@@ -802,7 +802,7 @@ def _band_integrals(aberrations, field, u, signal, noise, options, dtype, mirror
     The polar rule computes the OTF of both quadrants in one call of the overlap engine
     (the nodes of the two stacked): a wavefront that is not even in x then traces and
     compiles one OTF stage per panel instead of two, with the same values node by node."""
-    signs = jnp.asarray([-1.0 if m else 1.0 for m in mirrors], dtype)
+    signs = [-1.0 if m else 1.0 for m in mirrors]
     if options["quadrature"] != "polar":
         nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
         out = []
@@ -816,7 +816,7 @@ def _band_integrals(aberrations, field, u, signal, noise, options, dtype, mirror
         h_all = [_polar_otf(aberrations, coarse.nu_x, coarse.nu_y, field, options)]
     else:
         shape = (len(mirrors),) + coarse.nu_x.shape
-        nu_x = signs.reshape((-1,) + (1,) * coarse.nu_x.ndim) * coarse.nu_x
+        nu_x = jnp.asarray(signs, dtype).reshape((-1,) + (1,) * coarse.nu_x.ndim) * coarse.nu_x
         h_all = _polar_otf(aberrations, nu_x, jnp.broadcast_to(coarse.nu_y, shape), field,
                            options)
     out = []
