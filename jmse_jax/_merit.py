@@ -793,32 +793,29 @@ def _fine_stage_jvp(coarse, fine, dtype, ridges, primals, tangents):
 _fine_stage.defjvp(_fine_stage_jvp, symbolic_zeros=True)
 
 
-def _band_integrals(aberrations, field, u, signal, noise, options, dtype, mirrors,
+def _band_integrals(aberrations, field, u, signal, noise, options, dtype, mirrored,
                     estimate=False):
-    """``\\iint_band S_e`` over the folded first quadrant, one per entry of ``mirrors``
-    (True: the x-mirrored quadrant); with ``estimate``, each with its
+    """``\\iint_band S_e`` over the folded first quadrant, and with ``mirrored`` over the
+    x-mirrored one too (a list of one or two); with ``estimate``, each with its
     ``_interpolation_estimate``.
 
     The polar rule computes the OTF of both quadrants in one call of the overlap engine
     (the nodes of the two stacked): a wavefront that is not even in x then traces and
     compiles one OTF stage per panel instead of two, with the same values node by node."""
-    signs = [-1.0 if m else 1.0 for m in mirrors]
+    signs = (1.0, -1.0) if mirrored else (1.0,)
     if options["quadrature"] != "polar":
         nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
-        out = []
-        for sign in signs:
-            h = _otf_at(aberrations, sign * nu_x, nu_y, field, options)
-            out.append(jnp.sum(w * error_spectral_density(h, signal(nu_x, nu_y),
-                                                          noise(nu_x, nu_y))))
-        return out
+        s_x, s_n = signal(nu_x, nu_y), noise(nu_x, nu_y)
+        return [jnp.sum(w * error_spectral_density(
+            _otf_at(aberrations, sign * nu_x, nu_y, field, options), s_x, s_n))
+            for sign in signs]
     coarse = polar_panels(u, *options["nodes"], dtype)
-    if mirrors == (False,):  # the nodes as they are (an even wavefront's one quadrant)
-        h_all = [_polar_otf(aberrations, coarse.nu_x, coarse.nu_y, field, options)]
-    else:
-        shape = (len(mirrors),) + coarse.nu_x.shape
-        nu_x = jnp.asarray(signs, dtype).reshape((-1,) + (1,) * coarse.nu_x.ndim) * coarse.nu_x
-        h_all = _polar_otf(aberrations, nu_x, jnp.broadcast_to(coarse.nu_y, shape), field,
+    if mirrored:
+        nu_x = jnp.stack([coarse.nu_x, -coarse.nu_x])
+        h_all = _polar_otf(aberrations, nu_x, jnp.broadcast_to(coarse.nu_y, nu_x.shape), field,
                            options)
+    else:  # the nodes as they are (an even wavefront's one quadrant)
+        h_all = [_polar_otf(aberrations, coarse.nu_x, coarse.nu_y, field, options)]
     out = []
     for h in h_all:
         if options["se_nodes"] is None:
@@ -1047,11 +1044,10 @@ def _merit_value(options, dtype, aberrations, field, u, signal, noise, estimate=
         raise ValueError("an estimated grid needs the polar rule with se_nodes")
     if options.get("_radial"):  # a plan for rotationally symmetric designs (see jmse)
         return _one_ray_merit(_Static((options, dtype)), (aberrations, field, u, signal, noise))
-    mirrors = (False,) if aberrations.x_symmetric else (False, True)
-    halves = _band_integrals(aberrations, field, u, signal, noise, options, dtype, mirrors,
-                             estimate=estimate)
+    halves = _band_integrals(aberrations, field, u, signal, noise, options, dtype,
+                             not aberrations.x_symmetric, estimate=estimate)
     total = halves[0]
-    if not aberrations.x_symmetric:
+    if len(halves) == 2:  # a wavefront not even in x: the mirrored quadrant too
         mirrored = halves[1]
         if estimate:
             return (0.5 * (total[0] + mirrored[0]) / (2.0 * math.pi),
