@@ -80,9 +80,9 @@ _PEAKS = 12
 #: from a converged minimum; the search stops earlier once no minimum moves by more than
 #: rounding. Until 2026-12-02 it was three plain Newton steps, which left minima short of
 #: convergence and some in a cycle: on two random Zernike designs of the default's balanced
-#: plan at peak S_x / S_n 1e10-3e11 the gradient was 3.8e-6 and 2.2e-4 off the derivative
-#: of the value (one component 1.8e-3; ``benchmarks/gradient_fuzz.py``; the second needed
-#: seven Newton steps). Of 4000 random minima with strong quadratic and cubic terms
+#: plan, at peak S_x / S_n 3.3e11 and 1.6e8, the gradient was 3.8e-6 and 2.2e-4 off the
+#: derivative of the value (one component 1.8e-3; ``benchmarks/gradient_fuzz.py``; the
+#: second needed seven Newton steps). Of 4000 random minima with strong quadratic and cubic terms
 #: (``tests/test_ridges.py``), three steps left 1123 more than 1e-10 of a node spacing off,
 #: and three never converged however many steps they took: from a node where |p|^2 bends
 #: little, plain Newton jumped to the interval's end and back for ever, and the model was
