@@ -96,9 +96,9 @@ def _unit(i: int, n: int) -> np.ndarray:
     return e
 
 
-def _central(evaluate, x: np.ndarray, i: int, h: float) -> float:
+def _central(value_at, x: np.ndarray, i: int, h: float) -> float:
     e = _unit(i, len(x)) * h
-    return (evaluate(x + e)[0] - evaluate(x - e)[0]) / (2 * h)
+    return (value_at(x + e) - value_at(x - e)) / (2 * h)
 
 
 def step_of(i: int, x: np.ndarray, n_c: int) -> float | None:
@@ -135,9 +135,8 @@ def run_one(preset: str, designs: list[dict], family: str, rng) -> dict:
                                    [float(g) for g in grads[1:]]])
         return float(value), gradient
 
-    def evaluate_value(x):  # the value alone, as the gradient's program gives it
-        return (float(value_program(jnp.asarray(x[:n_c]), *(jnp.asarray(v) for v in x[n_c:]))),
-                None)
+    def value_alone(x):  # as the gradient's program gives it, for a design off the one ray
+        return float(value_program(jnp.asarray(x[:n_c]), *(jnp.asarray(v) for v in x[n_c:])))
 
     for k, d in enumerate(designs):
         x = np.array(list(d["coefficients"]) + [d[name] for name in SCALAR_NAMES])
@@ -146,7 +145,7 @@ def run_one(preset: str, designs: list[dict], family: str, rng) -> dict:
         centre = route_of(x, n_c, preset, family)
         # Without differentiation a design symmetric by its values takes the one-ray plan;
         # the program that gives the gradient then takes the polar grid (see above).
-        values = evaluate if centre[3] else evaluate_value
+        values = (lambda x: evaluate(x)[0]) if centre[3] else value_alone
         coordinates = list(range(n_c, len(x)))
         if family == "zernike":
             nonzero = [i for i in range(n_c) if x[i] != 0.0]
@@ -166,11 +165,10 @@ def run_one(preset: str, designs: list[dict], family: str, rng) -> dict:
             if len(routes) > 1:
                 skipped[i] = "plan changes"
                 continue
-            if routes != {centre}:  # a one-ray design, the symmetry broken on both sides
-                broken.append(i)
             # Central differences at h, h/2, h/4, ... with a Richardson step between
-            # neighbours, until two extrapolations agree (at high SNR the value varies on a
-            # scale finer than the first step: the peaks of S_e at the OTF's zeros).
+            # neighbours, until three extrapolations in a row agree (at high SNR the value
+            # varies on a scale finer than the first step: the peaks of S_e at the OTF's
+            # zeros).
             sigma = sigma_of(i, x, n_c)
             plain = [_central(values, x, i, h)]
             extrapolated = []
@@ -194,6 +192,8 @@ def run_one(preset: str, designs: list[dict], family: str, rng) -> dict:
                 continue
             fd[i] = extrapolated[-1]
             steps[i] = small
+            if routes != {centre}:  # a one-ray design, the symmetry broken on both sides
+                broken.append(i)
         names = [f"c{j}" for j in range(n_c)] + list(SCALAR_NAMES)
         sens = {i: sigma_of(i, x, n_c) * gradient[i] / value for i in fd}
         sens_fd = {i: sigma_of(i, x, n_c) * fd[i] / value for i in fd}

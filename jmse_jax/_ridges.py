@@ -82,8 +82,8 @@ _PEAKS = 12
 #: convergence and some in a cycle: on two random Zernike designs of the default's balanced
 #: plan, at peak S_x / S_n 3.3e11 and 1.6e8, the gradient was 3.8e-6 and 2.2e-4 off the
 #: derivative of the value (one component 1.8e-3; ``benchmarks/gradient_fuzz.py``; the
-#: second needed seven Newton steps). Of 4000 random minima with strong quadratic and cubic terms
-#: (``tests/test_ridges.py``), three steps left 1123 more than 1e-10 of a node spacing off,
+#: second needed seven Newton steps). Of 4000 random minima with strong quadratic and cubic
+#: terms (``tests/test_ridges.py``), three steps left 1123 more than 1e-10 of a node spacing off,
 #: and three never converged however many steps they took: from a node where |p|^2 bends
 #: little, plain Newton jumped to the interval's end and back for ever, and the model was
 #: then expanded away from the minimum (so the value was off too, not only its
@@ -116,6 +116,24 @@ def _cubic(x, c, z):
         dp = dp * step + p
         p = p * step + c[i]
     return p, dp, d2p, 6.0 * c[3]
+
+
+def _cubic_value(x, c, z):
+    """The value alone at ``z`` of the first two channels (``Re H``, ``Im H``) of
+    ``_cubic``: the search's trial points need nothing else."""
+    c = [k[:, :2] for k in c]
+    p = c[3]
+    for i in (2, 1, 0):
+        p = p * (z - x[:, i])[:, None] + c[i]
+    return p
+
+
+def _slope_and_bend(x, c, z):
+    """``(|p|^2)' / 2`` and ``(|p|^2)'' / 2`` at ``z`` of ``p = Re H + i Im H`` (``_cubic``)."""
+    p, dp, d2p, _ = _cubic(x, c, z)
+    slope = jnp.sum(p[:, :2] * dp[:, :2], axis=-1)
+    bend = jnp.sum(dp[:, :2] * dp[:, :2] + p[:, :2] * d2p[:, :2], axis=-1)
+    return slope, bend
 
 
 def _narrow_minima(d, denominator, s_x, t_host, starts, edges):
@@ -171,9 +189,7 @@ def _fit(y_re, y_im, y_q, y_n, j, live, stencil, t):
     # second derivatives are the implicit ones (the Newton map's own derivative in t
     # vanishes at the minimum), so that Hessians hold too (one step: first only).
     def newton(x, c, t0):
-        p, dp, d2p, _ = _cubic(x, c, t0)
-        slope = jnp.sum(p[:, :2] * dp[:, :2], axis=-1)
-        bend = jnp.sum(dp[:, :2] * dp[:, :2] + p[:, :2] * d2p[:, :2], axis=-1)
+        slope, bend = _slope_and_bend(x, c, t0)
         ok = bend > 0.0
         return jnp.clip(t0 - jnp.where(ok, slope / jnp.where(ok, bend, 1.0), 0.0), lo, hi)
 
@@ -186,28 +202,20 @@ def _fit(y_re, y_im, y_q, y_n, j, live, stencil, t):
     fixed = jax.lax.stop_gradient((x, c))
     rounding = 16.0 * jnp.finfo(t.dtype).eps
 
-    def square(z):  # |p|^2 at z, from the Newton form of Re H and Im H alone
-        nodes, coefficients = fixed[0], [k[:, :2] for k in fixed[1]]
-        p = coefficients[3]
-        for i in (2, 1, 0):
-            p = p * (z - nodes[:, i])[:, None] + coefficients[i]
-        return jnp.sum(p * p, axis=-1)
-
     def unsettled(state):
         step, _, moved = state
         return (step < _NEWTON) & moved
 
     def search(state):
         step, t0, _ = state
-        p, dp, d2p, _ = _cubic(*fixed, t0)
-        slope = jnp.sum(p[:, :2] * dp[:, :2], axis=-1)
-        bend = jnp.sum(dp[:, :2] * dp[:, :2] + p[:, :2] * d2p[:, :2], axis=-1)
+        slope, bend = _slope_and_bend(*fixed, t0)
         ok = bend > 0.0
         move = jnp.where(ok, -slope / jnp.where(ok, bend, 1.0),
                          -jnp.sign(slope) * 0.5 * (hi - lo))
         move = jnp.clip(t0 + move, lo, hi) - t0
         trials = [t0] + [t0 + move * 0.5 ** k for k in range(_HALVINGS)]
-        best = jnp.argmin(jnp.stack([square(z) for z in trials]), axis=0)
+        square = [jnp.sum(_cubic_value(*fixed, z) ** 2, axis=-1) for z in trials]
+        best = jnp.argmin(jnp.stack(square), axis=0)
         new = jnp.choose(best, trials, mode="clip")
         return step + 1, new, jnp.any(jnp.abs(new - t0) > rounding * jnp.abs(new))
 
