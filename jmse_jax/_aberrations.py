@@ -82,12 +82,28 @@ class AbstractAberrations(eqx.Module):
 
     def first_order_symmetric(self, field):
         """Whether, at a design where ``radially_symmetric`` holds, every first-order change
-        of the coefficients and of ``field`` changes ``jmse`` as its rotationally symmetric
-        part does (the one-ray plan's first derivatives are then exact). A Python bool or a
-        traced boolean; the default, ``False``, is always safe (``jmse`` then takes the
-        derivatives from the polar grid)."""
+        of the coefficients and of ``field`` changes ``jmse`` as its part in
+        ``symmetric_part`` does (the one-ray plan's first derivatives are then exact). A
+        Python bool or a traced boolean; the default, ``False``, is always safe (``jmse``
+        then takes the derivatives from the polar grid)."""
         del field
         return False
+
+    def symmetric_part(self, field) -> AbstractAberrations:
+        """A model whose wavefront at ``field`` is this one's less every non-radial term
+        (less its tilt too; evaluated at the same ``field``), as a differentiable function of
+        this model's coefficients and of ``field``: what the one-ray plan integrates.
+
+        At a design where ``radially_symmetric`` holds it equals the wavefront less its tilt,
+        so the merit is unchanged. Its derivatives matter where ``first_order_symmetric``
+        holds: the merit is unchanged by the band's symmetries (turns by 90 degrees and
+        mirrors, with isotropic spectra), so at a symmetric design a first-order change of
+        the wavefront acts as its average over them, which for terms ``cos m theta`` with
+        ``m`` not a multiple of 4, and every ``sin m theta``, is zero: their change acts as
+        its radial part alone. The default returns ``self`` (with the default
+        ``first_order_symmetric``, ``False``, its derivatives are never used)."""
+        del field
+        return self
 
     def without_tilt(self) -> AbstractAberrations:
         """The same wavefront less its best-fit tilt (its projection on ``x`` and ``y``).
@@ -165,11 +181,22 @@ class Seidel(AbstractAberrations):
         return (self.w131 * h == 0) & (self.w222 * (h * h) == 0)
 
     def first_order_symmetric(self, field):
-        # On the axis every non-radial term carries a power of the field height h: a change
-        # of its coefficient does nothing, and a change of h adds w131 rho^2 y + w111 y
-        # (m = 1), which a rotation by pi flips, so it cannot change the merit at first
-        # order. Off the axis a change of w222 adds h^2 y^2 (half of it rho^2: defocus).
-        return jnp.asarray(field) == 0
+        # Every non-radial term is of angular order m = 1 (coma, distortion, tilt) or m = 2
+        # (astigmatism's h^2 y^2 = h^2 rho^2 / 2 less a cos 2 theta term): a rotation by pi
+        # (m = 1) or pi / 2 (m = 2) flips its non-radial part, so at a symmetric design only
+        # the radial part a change adds (``symmetric_part``) moves the merit at first order.
+        del field
+        return True
+
+    def symmetric_part(self, field) -> Seidel:
+        # The radial part of W less its tilt: (w020 + w220 h^2 + w222 h^2 / 2) rho^2 +
+        # w040 rho^4, as one defocus coefficient (the others zero, so the field only enters
+        # through it). Where the design is symmetric, w222 h^2 == 0 and the defocus is
+        # bit for bit the wavefront's.
+        h2 = jnp.asarray(field) ** 2
+        zero = jnp.zeros_like(jnp.asarray(self.w131))
+        return Seidel(w020=(self.w020 + self.w220 * h2) + 0.5 * (self.w222 * h2),
+                      w040=self.w040, w131=zero, w222=zero, w220=zero, w311=zero, w111=zero)
 
     def without_tilt(self) -> Seidel:
         # Least-squares tilt of the y-odd terms: rho^2 y projects onto y with factor 2/3
@@ -363,6 +390,24 @@ class Zernike(AbstractAberrations):
         if not angular:
             return True
         return jnp.all(self.coefficients[np.asarray(angular)] == 0)
+
+    def first_order_symmetric(self, field):
+        # Every term but cos(m theta) with m a positive multiple of 4 (Z14, Z28, ...) is
+        # flipped by one of the band's turns or mirrors (``symmetric_part``); such a term
+        # keeps the band's symmetries and changes the merit at first order in a way the one
+        # ray cannot see.
+        del field
+        return not any(m > 0 and m % 4 == 0 for m in (noll_to_nm(j)[1] for j in self.noll))
+
+    def symmetric_part(self, field) -> Zernike:
+        # The radial terms (m = 0) alone; piston (zero) where there are none. The other
+        # terms are zero wherever the design is symmetric, and dropping them leaves each
+        # wavefront value bit for bit as it was (they add exact zeros).
+        del field
+        keep = [i for i, j in enumerate(self.noll) if noll_to_nm(j)[1] == 0]
+        if not keep:
+            return Zernike(0.0 * self.coefficients[:1], noll=(1,))
+        return Zernike(self.coefficients[np.asarray(keep)], noll=tuple(self.noll[i] for i in keep))
 
     def without_tilt(self) -> Zernike:
         # Z2 and Z3 are exactly the tilt (the basis is orthogonal over the pupil).

@@ -969,7 +969,12 @@ def _steep(strength, u):
 
 
 def _plain_one_ray_merit(options, dtype, operands):
-    return radial_band_integral(*operands, options, dtype) / (2.0 * math.pi)
+    # The one ray integrates the wavefront's radial part (``symmetric_part``): the same
+    # wavefront where the design is symmetric, and the right first derivatives wherever
+    # ``first_order_symmetric`` holds.
+    aberrations, field, *rest = operands
+    return radial_band_integral(aberrations.symmetric_part(field), field, *rest, options,
+                                dtype) / (2.0 * math.pi)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
@@ -1234,12 +1239,13 @@ def _switched_merit(static, index, operands):
     selected branch computes its value and gradient together, and the tangent is their
     inner product with the input tangents, outside the switch (forward and reverse mode).
     The gradient is that of the grid whose value is returned. A one-ray plan taken because
-    the values happen to be symmetric would miss the first-order effect of changes that
-    break the symmetry (the one ray cannot see them) unless every such change is harmless at
-    first order (a Seidel design on the axis: ``first_order_symmetric``); for the other
-    designs, the value and gradient under differentiation are the design's tier's (polar
-    grid). The one-ray plans' second derivatives are always the polar grid's
-    (``_one_ray_merit``).
+    the values happen to be symmetric integrates the wavefront's radial part
+    (``symmetric_part``), whose first derivatives are the merit's wherever every change
+    that breaks the symmetry acts at first order as its radial part
+    (``first_order_symmetric``: every Seidel design, and Zernike sets without a term
+    ``cos m theta`` of m a positive multiple of 4); for the other designs, the value and
+    gradient under differentiation are the design's tier's (polar grid). The one-ray plans'
+    second derivatives are always the polar grid's (``_one_ray_merit``).
 
     Under ``vmap`` (``_dispatch``) each tier runs, for the whole batch, only when one of
     the batch's designs selects it, and a shortcut's own grid only when one of them refuses
@@ -1513,16 +1519,17 @@ def _switched_merit_jvp(static, primals, tangents):
         value, gradient = _dispatch(plans, dtype, with_grad=wrt)(index, operands)
     else:
         # A one-ray plan taken because the values happen to be symmetric: its first
-        # derivatives hold only where every first-order change keeps the merit's change
-        # symmetric (``first_order_symmetric``: a Seidel design on the axis). Elsewhere the
-        # value and gradient are the design's tier's (polar grid): the value then differs
-        # from the one ray's by no more than that grid's error. (Taking the value from the
-        # one ray there too, by a second switch, cost 0.15 ms of every design's
-        # value_and_grad at the Fig. 1 point, one core: 1.37 -> 1.52 ms.)
+        # derivatives hold only where every first-order change acts as its radial part
+        # (``first_order_symmetric``; every Seidel design). Elsewhere (a Zernike set with a
+        # term cos 4k theta) the value and gradient are the design's tier's (polar grid):
+        # the value then differs from the one ray's by no more than that grid's error.
+        # (Taking the value from the one ray there too, by a second switch, cost 0.15 ms of
+        # every design's value_and_grad at the Fig. 1 point, one core: 1.37 -> 1.52 ms.)
         aberrations, field = operands[0], operands[1]
-        own = (index >= n_base) & jnp.asarray(aberrations.first_order_symmetric(field), bool)
-        value, gradient = _dispatch(plans, dtype, with_grad=wrt)(
-            jnp.where(own, index, tier), operands)
+        first_order = aberrations.first_order_symmetric(field)
+        if first_order is not True:
+            index = jnp.where((index >= n_base) & jnp.asarray(first_order, bool), index, tier)
+        value, gradient = _dispatch(plans, dtype, with_grad=wrt)(index, operands)
     return value, _tangent(value, gradient, live)
 
 
@@ -1873,9 +1880,10 @@ def _plans_and_index(static, aberrations, field, u):
     of a one-ray plan depends on the values (else None), all traceable.
 
     A one-ray plan chosen because the values happen to be symmetric (coma and astigmatism
-    zero off the axis, or on the axis at all) gives the right value but not the right
-    derivatives in the directions that break the symmetry: ``_switched_merit``'s derivative
-    rule then takes the gradient from the design's own tier (``_switched_merit_jvp``).
+    zero off the axis, or on the axis at all) gives the right value, and the right first
+    derivatives in the directions that break the symmetry only where
+    ``first_order_symmetric`` holds: elsewhere ``_switched_merit``'s derivative rule takes
+    the gradient from the design's own tier (``_switched_merit_jvp``).
     """
     plans = _base_plans(static, aberrations)
     index, by_strength, _ = _tier_of(static, aberrations, field, u)
