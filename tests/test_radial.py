@@ -64,6 +64,37 @@ def test_symmetry_predicate():
     assert jj.AbstractAberrations.radially_symmetric(coma, 0.0) is False  # the safe default
 
 
+@pytest.mark.parametrize("family", ["seidel", "zernike"])
+def test_symmetric_part_is_the_angular_mean(family):
+    """``symmetric_part`` (what the one ray integrates) against a brute-force oracle: the
+    mean of the wavefront less its tilt over 64 angles at each radius, for random designs
+    that are not symmetric (every term present), at a field off the axis. Its first
+    derivatives then carry each term's radial part, which is what a change of that term
+    does to the merit at a symmetric design (``first_order_symmetric``)."""
+    rng = np.random.default_rng(3)
+    field = 0.6
+    if family == "seidel":
+        ab = jj.Seidel(*rng.normal(size=7))
+    else:
+        ab = jj.Zernike(rng.normal(size=36), noll=tuple(range(2, 38)))
+    rho = np.linspace(0.0, 1.0, 11)[:, None]
+    theta = 2 * np.pi * np.arange(64)[None, :] / 64  # exact for every order below 64
+    x, y = rho * np.sin(theta), rho * np.cos(theta)
+    mean = np.mean(np.asarray(jj.wavefront(ab.without_tilt(), x, y, field)), axis=1)
+    part = ab.without_tilt().symmetric_part(field)
+    # Evaluated at 0.3 rad from the y axis: the part is rotationally symmetric.
+    along = np.asarray(jj.wavefront(part, rho[:, 0] * math.sin(0.3), rho[:, 0] * math.cos(0.3),
+                                    field))
+    np.testing.assert_allclose(along, mean, rtol=0, atol=1e-13)
+    assert bool(part.radially_symmetric(field))
+    if family == "zernike":
+        assert part.noll == (4, 11, 22, 37)
+        assert not ab.first_order_symmetric(field)  # Z14, Z26: cos 4 theta
+        assert jj.Zernike(np.ones(3), noll=(4, 6, 12)).first_order_symmetric(field)
+    else:
+        assert ab.first_order_symmetric(field)
+
+
 @pytest.mark.parametrize("u", [0.3, 0.85, 1.2])
 def test_aberration_free_lens_equals_cartesian_oracle(u):
     """Every piece of the ray: [0, u] and the corners before the cutoff (0.3), the cutoff
