@@ -392,7 +392,7 @@ class Zernike(AbstractAberrations):
         return jnp.all(self.coefficients[np.asarray(angular)] == 0)
 
     def first_order_symmetric(self, field):
-        # Every term but cos(m theta) with m a positive multiple of 4 (Z14, Z28, ...) is
+        # Every term but cos(m theta) with m a positive multiple of 4 (Z14, Z26, Z40, Z44) is
         # flipped by one of the band's turns or mirrors (``symmetric_part``); such a term
         # keeps the band's symmetries and changes the merit at first order in a way the one
         # ray cannot see.
