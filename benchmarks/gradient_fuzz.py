@@ -259,6 +259,8 @@ def run_one(preset: str, designs: list[dict], family: str, rng) -> dict:
                 skipped_domain=sum(list(r["skipped"].values()).count("domain") for r in rows),
                 skipped_unconverged=sum(list(r["skipped"].values()).count(
                     "differences not converged") for r in rows),
+                skipped_no_oracle=sum(list(r["skipped"].values()).count("no oracle")
+                                      for r in rows),
                 polar_gap=max((r["polar_gap"] for r in rows if r["polar_gap"] is not None),
                               default=None),
                 worst=max(r["error"] for r in rows),
@@ -317,6 +319,10 @@ def main(argv=None) -> int:
             f"({worst_checked}) | {r['median']:.1e} | {r['not_finite']} | "
             f"{len(r['failures'])} | {r['seconds']:.0f} s |")
     for r in runs:
+        if r["skipped_no_oracle"]:
+            lines.append(f"\n{r['preset']}: {r['skipped_no_oracle']} symmetry-breaking "
+                         "components left out: the defocus's derivative, their oracle, was "
+                         "not differenced.")
         if r["polar_gap"] is not None:
             lines.append(
                 f"\n{r['preset']}: {r['symmetry_broken']} components break a one-ray design's "

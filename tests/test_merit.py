@@ -365,7 +365,7 @@ def test_gradient_of_a_wavefront_not_even_in_x_through_both_quadrants():
 
     gradient = jax.jit(jax.grad(merit), static_argnames=("coma", "plane"))
     for theta in (np.array([0.4, 0.6, -0.3, 0.3]), np.array([0.4, 0.0, -0.3, 0.3])):
-        plane = theta[1] == 0.0
+        plane = bool(theta[1] == 0.0)
         along_x = np.asarray(gradient(jnp.asarray(theta), coma=7, plane=plane))
         along_y = np.asarray(gradient(jnp.asarray(theta), coma=8, plane=plane))
         scale = np.max(np.abs(along_x))
