@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import math
 import warnings
 
@@ -345,36 +344,59 @@ def test_wavefront_not_even_in_x_shares_one_otf_stage_between_its_quadrants():
     assert size(along_x) < 1.2 * size(along_y)
 
 
+def _stacked_quadrant_merit():
+    """``jax.jit`` of the value and gradient, in ``theta = (Z4, coma, Z11, u)``, of the fast
+    preset's merit of ``Zernike((Z4, coma, Z11), noll=(4, coma, 11))`` at field 0.5 (one
+    program per static ``coma`` and ``plane``; with ``plane`` the polar grid is given
+    explicitly). The differences take the value of the same program."""
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+
+    def merit(theta, coma, plane=False):
+        ab = jj.Zernike(theta[:3], noll=(4, coma, 11))
+        grid = dict(nodes=jj.PRESETS["fast"]["nodes"]) if plane else {}
+        return jj.jmse(ab, 0.5, theta[3], signal, noise, preset="fast", **grid)
+
+    return jax.jit(jax.value_and_grad(merit), static_argnames=("coma", "plane"))
+
+
 def test_gradient_of_a_wavefront_not_even_in_x_through_both_quadrants():
     """The derivatives through the stacked quadrants (a wavefront not even in x). Oracles:
     central differences of the same program, and the turn by 90 degrees of the test above
     (Z7 is Z8 turned, so the merit of (Z4, Z7, Z11) is that of (Z4, Z8, Z11) at the same
     coefficients, whose even wavefront takes one quadrant: equal gradients in the
-    coefficients and in u). At Z7 = 0 the program still takes both quadrants (evenness is
-    read from the Noll indices), and the derivative in Z7 is zero: mirroring x turns Z7
-    into -Z7 and leaves the band as it is. There the design is rotationally symmetric, and
-    a plain call would take the one-ray plan (its derivatives: ``test_radial``), so the
-    polar grid is given explicitly (``plane``), as it is to the differences everywhere."""
-    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    coefficients and in u). Z7 = 0, where the design is symmetric: the next test (slow)."""
+    merit = _stacked_quadrant_merit()
+    theta = np.array([0.4, 0.6, -0.3, 0.3])
+    along_x = np.asarray(merit(jnp.asarray(theta), coma=7)[1])
+    along_y = np.asarray(merit(jnp.asarray(theta), coma=8)[1])
+    scale = np.max(np.abs(along_x))
+    assert np.all(np.isfinite(along_x)) and scale > 0
+    np.testing.assert_allclose(along_x, along_y, rtol=1e-9, atol=1e-12 * scale)
+    fd = np.array([oracles.richardson_difference(lambda t: merit(jnp.asarray(t), coma=7)[0],
+                                                 theta, i, 1e-4) for i in range(4)])
+    np.testing.assert_allclose(along_x, fd, rtol=1e-6, atol=1e-9 * scale)
 
-    @functools.partial(jax.jit, static_argnames=("coma", "plane"))
-    def merit(theta, coma, plane=False):  # theta: (Z4, coma, Z11, u)
-        ab = jj.Zernike(theta[:3], noll=(4, coma, 11))
-        grid = dict(nodes=jj.PRESETS["fast"]["nodes"]) if plane else {}
-        return jj.jmse(ab, 0.5, theta[3], signal, noise, preset="fast", **grid)
 
-    gradient = jax.jit(jax.grad(merit), static_argnames=("coma", "plane"))
-    for theta in (np.array([0.4, 0.6, -0.3, 0.3]), np.array([0.4, 0.0, -0.3, 0.3])):
-        plane = bool(theta[1] == 0.0)
-        along_x = np.asarray(gradient(jnp.asarray(theta), coma=7, plane=plane))
-        along_y = np.asarray(gradient(jnp.asarray(theta), coma=8, plane=plane))
-        scale = np.max(np.abs(along_x))
-        np.testing.assert_allclose(along_x, along_y, rtol=1e-9, atol=1e-12 * scale)
-        fd = np.array([oracles.richardson_difference(
-            lambda t: merit(jnp.asarray(t), coma=7, plane=True), theta, i, 1e-4)
-            for i in range(4)])
-        np.testing.assert_allclose(along_x, fd, rtol=1e-6, atol=1e-9 * scale)
-        assert np.all(np.isfinite(along_x)) and scale > 0
+# Slow: two more Zernike programs (about 50 s on the CI machine); the stacked quadrants'
+# derivatives keep their default-run check in the test above.
+@pytest.mark.slow
+def test_gradient_through_both_quadrants_where_the_odd_term_vanishes():
+    """At Z7 = 0 the program still takes both quadrants (evenness is read from the Noll
+    indices), and the derivative in Z7 is zero: mirroring x turns Z7 into -Z7 and leaves the
+    band as it is. There the design is rotationally symmetric, and a plain call would take
+    the one-ray plan (its derivatives: ``test_radial``), so the polar grid is given
+    explicitly (``plane``). Oracles as in the test above."""
+    merit = _stacked_quadrant_merit()
+    theta = np.array([0.4, 0.0, -0.3, 0.3])
+    along_x = np.asarray(merit(jnp.asarray(theta), coma=7, plane=True)[1])
+    along_y = np.asarray(merit(jnp.asarray(theta), coma=8, plane=True)[1])
+    scale = np.max(np.abs(along_x))
+    assert np.all(np.isfinite(along_x)) and scale > 0
+    np.testing.assert_allclose(along_x, along_y, rtol=1e-9, atol=1e-12 * scale)
+    fd = np.array([oracles.richardson_difference(
+        lambda t: merit(jnp.asarray(t), coma=7, plane=True)[0], theta, i, 1e-4)
+        for i in range(4)])
+    np.testing.assert_allclose(along_x, fd, rtol=1e-6, atol=1e-9 * scale)
     assert along_x[1] == 0.0 or abs(along_x[1]) <= 1e-12 * scale  # even in Z7 at Z7 = 0
 
 
@@ -673,55 +695,75 @@ def _route_and_reference(ab, u, signal, noise):
     return route, reference
 
 
+#: The worst design of ``benchmarks/zernike_designs.py`` (Noll 4-22; it cancels 2.5 times).
+WORST_ZERNIKE = jj.Zernike([0.5748, 0.4421, -0.4164, -0.0005, 0.1932, 0.2031, 0.3799, 0.0834,
+                            -0.0308, -0.0842, 0.3433, -0.732, -0.0361, 0.0086, -0.3708, 0.0866,
+                            -0.1694, 0.2244, -0.0272], noll=tuple(range(4, 23)))
+#: Defocus with ``Z27`` (``rho^6 sin 6 theta``), which cancels nothing.
+DEFOCUS_Z27 = jj.Zernike([-0.49136511167521296, 0.9256500375393379], noll=(4, 27))
+
+
+def _default_plan(design, u, noise):
+    """The default's choice for a concrete design at field 0.5 (``MarkovSignal(1, 5)``):
+    (plan index, index by strength alone, strength, cancellation). Index
+    ``len(DEFAULT_TIERS) - 1`` is the steep tier, ``len(DEFAULT_TIERS)`` the balanced grid."""
+    from jmse_jax import _merit
+
+    static, inputs = _merit._prepare((design, 0.5, u, jj.MarkovSignal(1.0, 5.0), noise),
+                                     jj.jmse_options())
+    index, by_strength, _, strength, cancellation = _merit._concrete_choice(
+        static, *inputs[:3])
+    return int(index), int(by_strength), float(strength), float(cancellation)
+
+
 def test_designs_beyond_seidel_degree_take_the_steep_or_the_balanced_grid():
     """The tiers were calibrated on Seidel designs (degree 4). On random Zernike designs of
     Noll 4-22 to 4-45 they were up to 5e-3 off (``benchmarks/zernike_designs.py``,
     ``zernike_routes.py``), so a design with a nonzero term of radial order 5 or more takes,
     from a strength of 2.5, the steep tier's grid up to ``STEEP_SLOPE`` and the balanced
-    grid past it (or when its terms cancel). The worst design of ``zernike_designs.py``
-    (it cancels 2.5 times) within 1e-5 of a finer polar grid (two such grids agree to
-    1.4e-8), where its tier (2) is 2e-3 off; defocus with ``Z27`` (``rho^6 sin 6 theta``),
-    which cancels nothing, within 1e-5 in the steep tier where its tier (3) is 5e-3 off; and
-    the routes of secondary coma (Noll 16) alone."""
+    grid past it (or when its terms cancel). The routes of the worst design of
+    ``zernike_designs.py`` (balanced: it cancels), of defocus with ``Z27`` (steep) and of
+    secondary coma (Noll 16) alone; their accuracy there: the next test (slow)."""
     from jmse_jax import _merit
 
-    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
-    ab = jj.Zernike([0.5748, 0.4421, -0.4164, -0.0005, 0.1932, 0.2031, 0.3799, 0.0834, -0.0308,
-                     -0.0842, 0.3433, -0.732, -0.0361, 0.0086, -0.3708, 0.0866, -0.1694, 0.2244,
-                     -0.0272], noll=tuple(range(4, 23)))
-    route, reference = _route_and_reference(ab, 0.2, signal, noise)
-    assert route["balanced"]
-    assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
-    tier = float(jj.jmse(ab, 0.5, 0.2, signal, noise, **jj.DEFAULT_TIERS[2][2]))
-    assert abs(tier / reference - 1.0) > 1e-3
-
-    def plan(design, u):
-        static, inputs = _merit._prepare((design, 0.5, u, signal, noise), jj.jmse_options())
-        index, by_strength, _, strength, cancellation = _merit._concrete_choice(
-            static, *inputs[:3])
-        return int(index), int(by_strength), float(strength), float(cancellation)
-
-    # A design that cancels nothing: the steep tier, within 1e-5, where its tier is 5e-3 off.
-    ab = jj.Zernike([-0.49136511167521296, 0.9256500375393379], noll=(4, 27))
-    route, reference = _route_and_reference(ab, 0.7, signal, noise)
-    steep = len(jj.DEFAULT_TIERS) - 1
-    assert route["tier"] == steep and not route["balanced"]
-    assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
-    tier = float(jj.jmse(ab, 0.5, 0.7, signal, noise, **jj.DEFAULT_TIERS[3][2]))
-    assert abs(tier / reference - 1.0) > 3e-3
-
-    balanced = len(jj.DEFAULT_TIERS)
-    index, by_strength, strength, cancellation = plan(jj.Zernike([0.24], noll=(16,)), 0.5)
+    noise = jj.WhiteNoise(1e-4)
+    steep, balanced = len(jj.DEFAULT_TIERS) - 1, len(jj.DEFAULT_TIERS)
+    assert _default_plan(WORST_ZERNIKE, 0.2, noise)[0] == balanced
+    assert _default_plan(DEFOCUS_Z27, 0.7, noise)[0] == steep
+    index, by_strength, strength, cancellation = _default_plan(
+        jj.Zernike([0.24], noll=(16,)), 0.5, noise)
     assert index == steep and by_strength < steep
     assert 2.5 < strength < _merit.STEEP_SLOPE * math.sqrt(2.0) * 0.5
     assert cancellation == pytest.approx(1.0)
     # Past STEEP_SLOPE (slope 50: the term at u = 0.2, 3.5 times larger), the balanced grid.
-    index, by_strength, strength, _ = plan(jj.Zernike([0.85], noll=(16,)), 0.2)
+    index, by_strength, strength, _ = _default_plan(jj.Zernike([0.85], noll=(16,)), 0.2, noise)
     assert index == balanced and by_strength == steep
     assert _merit.STEEP_SLOPE * math.sqrt(2.0) * 0.2 < strength < _merit.CHECKED_SLOPE * 0.28
     # Below the strength bound, or with the high-order term zero, the tiers by strength.
-    assert plan(jj.Zernike([0.02], noll=(16,)), 0.5)[0] < steep
-    assert plan(jj.Zernike([0.24, 0.0], noll=(8, 16)), 0.5)[0] < steep
+    assert _default_plan(jj.Zernike([0.02], noll=(16,)), 0.5, noise)[0] < steep
+    assert _default_plan(jj.Zernike([0.24, 0.0], noll=(8, 16)), 0.5, noise)[0] < steep
+
+
+# Slow: Zernike programs of the default, its tiers and a finer grid (about 70 s on the CI
+# machine); designs beyond Seidel's degree keep a default-run accuracy check in the next
+# test (defocus with Z28 in the balanced plan).
+@pytest.mark.slow
+def test_designs_beyond_seidel_degree_are_accurate_in_the_steep_and_balanced_grids():
+    """The worst design of ``zernike_designs.py`` within 1e-5 of a finer polar grid (two
+    such grids agree to 1.4e-8), where its tier (2) is 2e-3 off; defocus with ``Z27`` within
+    1e-5 in the steep tier where its tier (3) is 5e-3 off."""
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
+    route, reference = _route_and_reference(WORST_ZERNIKE, 0.2, signal, noise)
+    assert route["balanced"]
+    assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
+    tier = float(jj.jmse(WORST_ZERNIKE, 0.5, 0.2, signal, noise, **jj.DEFAULT_TIERS[2][2]))
+    assert abs(tier / reference - 1.0) > 1e-3
+
+    route, reference = _route_and_reference(DEFOCUS_Z27, 0.7, signal, noise)
+    assert route["tier"] == len(jj.DEFAULT_TIERS) - 1 and not route["balanced"]
+    assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
+    tier = float(jj.jmse(DEFOCUS_Z27, 0.5, 0.7, signal, noise, **jj.DEFAULT_TIERS[3][2]))
+    assert abs(tier / reference - 1.0) > 3e-3
 
 
 def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_rule():
@@ -758,24 +800,26 @@ def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_ru
         assert options["overlap_floor"] == jj.BALANCED_GRID["overlap_floor"]
 
 
+#: A random Noll 4-22 design that ``"high"`` routes to its balanced plan at u = 0.2, field 0.5
+#: (slope 55, cancellation 3.6; ``benchmarks/zernike_high_routes.py``).
+HIGH_BALANCED_ZERNIKE = jj.Zernike(
+    [0.36443759675008447, 0.2420869269465188, -0.9937494292524693, 0.47622764766103204,
+     -0.33741398227225927, -0.6035140844382162, -0.5145916290332639, -0.1673877808993987,
+     0.6974610820877123, -0.5038348282375937, 0.06860854652113262, -0.9162717733690122,
+     -0.0005372701854637292, 0.30844341855666246, -0.08114714231821417, -0.21579327600146167,
+     0.07938053560543282, 0.2400680988506334, 0.1896291424206036], noll=tuple(range(4, 23)))
+
+
 def test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes():
     """``"high"``'s balanced plan, which a design beyond Seidel's degree takes from a
     strength of 2.5, has in a program for such designs the OTF nodes ``HIGH_DEGREE_NODES``
-    with ``DEGREE_OVERLAP``. A random Noll 4-22 design at u = 0.2 (slope 55, cancellation
-    3.6) is within 3e-6 of a finer polar grid (whose difference from a finer one still is
-    1.1e-6), where ``HIGH_BALANCED_GRID`` with that rule, its 48 angular OTF nodes, is
-    2.3e-5 off (``benchmarks/zernike_high_routes.py``). A Seidel program's balanced plan
-    keeps ``HIGH_BALANCED_GRID``'s nodes, and the default's ``BALANCED_GRID``'s."""
+    with ``DEGREE_OVERLAP``; a random Noll 4-22 design at u = 0.2 takes it (its accuracy
+    there: the next test, slow). A Seidel program's balanced plan keeps
+    ``HIGH_BALANCED_GRID``'s nodes, and the default's ``BALANCED_GRID``'s."""
     from jmse_jax import _merit
 
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
-    ab = jj.Zernike([0.36443759675008447, 0.2420869269465188, -0.9937494292524693,
-                     0.47622764766103204, -0.33741398227225927, -0.6035140844382162,
-                     -0.5145916290332639, -0.1673877808993987, 0.6974610820877123,
-                     -0.5038348282375937, 0.06860854652113262, -0.9162717733690122,
-                     -0.0005372701854637292, 0.30844341855666246, -0.08114714231821417,
-                     -0.21579327600146167, 0.07938053560543282, 0.2400680988506334,
-                     0.1896291424206036], noll=tuple(range(4, 23)))
+    ab = HIGH_BALANCED_ZERNIKE
 
     def plans(design, preset="high"):
         static, inputs = _merit._prepare((design, 0.5, 0.2, signal, noise),
@@ -792,6 +836,15 @@ def test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes():
     assert plans(jj.Seidel(w020=1.0))[2][-1][0]["nodes"] == jj.HIGH_BALANCED_GRID["nodes"]
     assert plans(ab, "default")[2][-1][0]["nodes"] == jj.BALANCED_GRID["nodes"]
 
+
+# Slow: three Zernike programs of "high"'s size (about 45 s on the CI machine).
+@pytest.mark.slow
+def test_high_balanced_plan_beyond_seidel_degree_is_accurate():
+    """The design of the test above within 3e-6 of a finer polar grid (whose difference from
+    a finer one still is 1.1e-6), where ``HIGH_BALANCED_GRID`` with ``DEGREE_OVERLAP``, its
+    48 angular OTF nodes, is 2.3e-5 off (``benchmarks/zernike_high_routes.py``)."""
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
+    ab = HIGH_BALANCED_ZERNIKE
     reference = float(jj.jmse(ab, 0.5, 0.2, signal, noise, nodes=(160, 80),
                               se_nodes=(6400, 512), overlap_nodes=(128, 128),
                               overlap_floor=128, peaks=True))

@@ -530,7 +530,7 @@ def test_derivatives_break_the_symmetry_correctly(field):
         assert grad[3] == pytest.approx(0.5 * field**2 * grad[0], rel=1e-12)
         assert grad[3] > 1e-3
         along = oracles.richardson_difference(
-            lambda h: _fast_theta(x, jnp.asarray(h[0])), np.array([field]), 0, 1e-4)
+            lambda h: _fast_theta(x, float(h[0])), np.array([field]), 0, 1e-4)
         assert float(d_field) == pytest.approx(along, rel=1e-8)
         plane = np.array([oracles.richardson_difference(
             lambda t: _fast_theta(jnp.asarray(t), field, plane=True, preset="default"),

@@ -510,47 +510,42 @@ def test_vmap_gives_each_design_what_it_gets_alone(monkeypatch, vectorised_vmap)
     assert_vmap_matches_singles(merit, [(ab, f) for ab, f, _, _ in designs] + on_axis)
 
 
-def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
-    """On CPU ``vmap`` of ``jmse`` and of its derivatives runs the designs one at a time
-    (``SEQUENTIAL_VMAP_BACKENDS``): the tiers' vectorised dispatch is never reached (it
-    raises here), and every design gets bit for bit what it gets alone, for the value,
-    ``value_and_grad`` and a batch over ``u`` only (forward mode and the Hessian: the next
-    test); one design's terms cancel, and it gets the balanced grid's value and gradient."""
+#: Designs for the CPU ``vmap`` tests: tiers 0 and 1 of ``SMALL_TIERS``, defocus -6, and a
+#: design whose terms cancel (the balanced grid).
+CPU_VMAP_DESIGNS = [DESIGNS[0], DESIGNS[1], DEFOCUS_M6, MEDIAL_FOCUS]
+
+
+def _cpu_vmap_batch(monkeypatch):
+    """``_small_tiers_design_by_design`` with ``SMALL_BALANCED``, and the batch of
+    ``CPU_VMAP_DESIGNS`` (coefficients, fields); the last design takes the balanced grid."""
     from jmse_jax import _merit
 
     assert jax.default_backend() in _merit.SEQUENTIAL_VMAP_BACKENDS
     _small_tiers_design_by_design(monkeypatch, SMALL_BALANCED)
-    designs = [DESIGNS[0], DESIGNS[1], DEFOCUS_M6, MEDIAL_FOCUS]
-    # The last design's terms cancel: it takes the balanced grid, in the batch as alone.
     route = _merit._route(*MEDIAL_FOCUS[:3], SIGNAL, NOISE)
     assert route["balanced"] and route["tier"] == len(SMALL_TIERS)
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack([jnp.asarray(v, jnp.float64) for v in x]),
-                                   *[jj.Seidel(**_coefficients(d[0])) for d in designs])
-    fields = jnp.asarray([d[1] for d in designs])
+                                   *[jj.Seidel(**_coefficients(d[0])) for d in CPU_VMAP_DESIGNS])
+    return batch, jnp.asarray([d[1] for d in CPU_VMAP_DESIGNS])
 
-    def merit(a, f, u=0.2):
-        return jj.jmse(a, f, u, SIGNAL, NOISE)
 
-    vag = jax.value_and_grad(merit, argnums=(0, 1))
+def _cpu_merit(a, f, u=0.2):
+    return jj.jmse(a, f, u, SIGNAL, NOISE)
+
+
+def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
+    """On CPU ``vmap`` of ``jmse`` runs the designs one at a time
+    (``SEQUENTIAL_VMAP_BACKENDS``): the tiers' vectorised dispatch is never reached (it
+    raises here), and every design, the one whose terms cancel (balanced grid) included,
+    gets bit for bit what it gets alone, in a batch over designs and in one over ``u`` only.
+    ``value_and_grad`` under ``vmap``: the next test (slow); forward mode and the Hessian:
+    the one after."""
+    batch, fields = _cpu_vmap_batch(monkeypatch)
+    merit = _cpu_merit
     values = jax.jit(jax.vmap(merit))(batch, fields)
-    values_g, (grads, field_grads) = jax.jit(jax.vmap(vag))(batch, fields)
-    single, single_vag = jax.jit(merit), jax.jit(vag)
-    for i, (ab, f, _, _) in enumerate(designs):
-        ab = jj.Seidel(**_coefficients(ab))
-        value, (grad, field_grad) = single_vag(ab, jnp.float64(f))
-        assert float(values[i]) == float(single(ab, jnp.float64(f))) == float(value)
-        assert float(values_g[i]) == float(value)
-        assert float(field_grads[i]) == float(field_grad)
-        for name in ("w020", "w040", "w131", "w222", "w220"):
-            assert float(getattr(grads, name)[i]) == float(getattr(grad, name))
-    # The balanced design gets its grid's value and gradient (the oracle: that grid fixed).
-    ab, f, u, _ = MEDIAL_FOCUS
-    oracle, oracle_grad = jax.value_and_grad(
-        lambda a: jj.jmse(a, f, u, SIGNAL, NOISE, **SMALL_BALANCED))(ab)
-    assert float(values[-1]) == pytest.approx(float(oracle), rel=1e-13)
-    for name in ("w020", "w222"):
-        np.testing.assert_allclose(float(getattr(grads, name)[-1]),
-                                   float(getattr(oracle_grad, name)), rtol=1e-10)
+    single = jax.jit(merit)
+    for i, (ab, f, _, _) in enumerate(CPU_VMAP_DESIGNS):
+        assert float(values[i]) == float(single(jj.Seidel(**_coefficients(ab)), jnp.float64(f)))
     # A batch over u alone (the design and field broadcast to it).
     ab, f = jj.Seidel(**_coefficients(DESIGNS[1][0])), jnp.float64(DESIGNS[1][1])
     us = jnp.asarray([0.15, 0.2, 0.3])
@@ -559,9 +554,35 @@ def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
         assert float(over_u[i]) == float(jax.jit(merit)(ab, f, u))
 
 
+# Slow: three more programs of the small tiers (about 70 s on the CI machine).
+@pytest.mark.slow
+def test_value_and_grad_under_vmap_runs_design_by_design_on_cpu(monkeypatch):
+    """``vmap`` of ``value_and_grad`` on CPU, as the test above: each design gets bit for bit
+    the value and gradient it gets alone (whose value the value's batch gives too), and the
+    design whose terms cancel its balanced grid's (the oracle: that grid fixed)."""
+    batch, fields = _cpu_vmap_batch(monkeypatch)
+    vag = jax.value_and_grad(_cpu_merit, argnums=(0, 1))
+    values = jax.jit(jax.vmap(_cpu_merit))(batch, fields)
+    values_g, (grads, field_grads) = jax.jit(jax.vmap(vag))(batch, fields)
+    single_vag = jax.jit(vag)
+    for i, (ab, f, _, _) in enumerate(CPU_VMAP_DESIGNS):
+        value, (grad, field_grad) = single_vag(jj.Seidel(**_coefficients(ab)), jnp.float64(f))
+        assert float(values[i]) == float(values_g[i]) == float(value)
+        assert float(field_grads[i]) == float(field_grad)
+        for name in ("w020", "w040", "w131", "w222", "w220"):
+            assert float(getattr(grads, name)[i]) == float(getattr(grad, name))
+    ab, f, u, _ = MEDIAL_FOCUS
+    oracle, oracle_grad = jax.value_and_grad(
+        lambda a: jj.jmse(a, f, u, SIGNAL, NOISE, **SMALL_BALANCED))(ab)
+    assert float(values_g[-1]) == pytest.approx(float(oracle), rel=1e-13)
+    for name in ("w020", "w222"):
+        np.testing.assert_allclose(float(getattr(grads, name)[-1]),
+                                   float(getattr(oracle_grad, name)), rtol=1e-10)
+
+
 @pytest.mark.slow
 def test_forward_mode_and_hessian_under_vmap_on_cpu(monkeypatch):
-    """The rest of the test above, for forward mode and second derivatives (their programs
+    """The CPU ``vmap`` tests above, for forward mode and second derivatives (their programs
     take about a minute to compile, so they run with ``make test-slow``): on CPU ``jacfwd``
     equals the gradient, the Hessian equals central differences of the gradient, and a
     ``vmap`` of the Hessian gives each design what it gets alone, without reaching the
