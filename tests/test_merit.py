@@ -703,17 +703,32 @@ WORST_ZERNIKE = jj.Zernike([0.5748, 0.4421, -0.4164, -0.0005, 0.1932, 0.2031, 0.
 DEFOCUS_Z27 = jj.Zernike([-0.49136511167521296, 0.9256500375393379], noll=(4, 27))
 
 
-def _default_plan(design, u, noise):
-    """The default's choice for a concrete design at field 0.5 (``MarkovSignal(1, 5)``):
-    (plan index, index by strength alone, strength, cancellation). Index
+def _prepared(design, u, preset):
+    """``_merit._prepare`` of a concrete design at field 0.5, ``MarkovSignal(1, 5)`` and
+    ``WhiteNoise(1e-4)`` under ``preset``'s options: (static, inputs)."""
+    from jmse_jax import _merit
+
+    return _merit._prepare((design, 0.5, u, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)),
+                           jj.jmse_options(preset))
+
+
+def _plan_choice(design, u, preset="default"):
+    """``preset``'s choice for a concrete design (``_prepared``): (plan index, index by
+    strength alone, strength, cancellation). For the default, index
     ``len(DEFAULT_TIERS) - 1`` is the steep tier, ``len(DEFAULT_TIERS)`` the balanced grid."""
     from jmse_jax import _merit
 
-    static, inputs = _merit._prepare((design, 0.5, u, jj.MarkovSignal(1.0, 5.0), noise),
-                                     jj.jmse_options())
+    static, inputs = _prepared(design, u, preset)
     index, by_strength, _, strength, cancellation = _merit._concrete_choice(
         static, *inputs[:3])
     return int(index), int(by_strength), float(strength), float(cancellation)
+
+
+def _base_plans(design, u, preset="default"):
+    """``_merit._base_plans`` of ``preset``'s program for ``design`` (``_prepared``)."""
+    from jmse_jax import _merit
+
+    return _merit._base_plans(_prepared(design, u, preset)[0], design)
 
 
 def test_designs_beyond_seidel_degree_take_the_steep_or_the_balanced_grid():
@@ -726,22 +741,21 @@ def test_designs_beyond_seidel_degree_take_the_steep_or_the_balanced_grid():
     secondary coma (Noll 16) alone; their accuracy there: the next test (slow)."""
     from jmse_jax import _merit
 
-    noise = jj.WhiteNoise(1e-4)
     steep, balanced = len(jj.DEFAULT_TIERS) - 1, len(jj.DEFAULT_TIERS)
-    assert _default_plan(WORST_ZERNIKE, 0.2, noise)[0] == balanced
-    assert _default_plan(DEFOCUS_Z27, 0.7, noise)[0] == steep
-    index, by_strength, strength, cancellation = _default_plan(
-        jj.Zernike([0.24], noll=(16,)), 0.5, noise)
+    assert _plan_choice(WORST_ZERNIKE, 0.2)[0] == balanced
+    assert _plan_choice(DEFOCUS_Z27, 0.7)[0] == steep
+    index, by_strength, strength, cancellation = _plan_choice(jj.Zernike([0.24], noll=(16,)),
+                                                              0.5)
     assert index == steep and by_strength < steep
     assert 2.5 < strength < _merit.STEEP_SLOPE * math.sqrt(2.0) * 0.5
     assert cancellation == pytest.approx(1.0)
     # Past STEEP_SLOPE (slope 50: the term at u = 0.2, 3.5 times larger), the balanced grid.
-    index, by_strength, strength, _ = _default_plan(jj.Zernike([0.85], noll=(16,)), 0.2, noise)
+    index, by_strength, strength, _ = _plan_choice(jj.Zernike([0.85], noll=(16,)), 0.2)
     assert index == balanced and by_strength == steep
     assert _merit.STEEP_SLOPE * math.sqrt(2.0) * 0.2 < strength < _merit.CHECKED_SLOPE * 0.28
     # Below the strength bound, or with the high-order term zero, the tiers by strength.
-    assert _default_plan(jj.Zernike([0.02], noll=(16,)), 0.5, noise)[0] < steep
-    assert _default_plan(jj.Zernike([0.24, 0.0], noll=(8, 16)), 0.5, noise)[0] < steep
+    assert _plan_choice(jj.Zernike([0.02], noll=(16,)), 0.5)[0] < steep
+    assert _plan_choice(jj.Zernike([0.24, 0.0], noll=(8, 16)), 0.5)[0] < steep
 
 
 # Slow: Zernike programs of the default, its tiers and a finer grid (about 70 s on the CI
@@ -773,8 +787,6 @@ def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_ru
     a finer polar grid (converged to 3e-7), where ``BALANCED_GRID`` itself is 3.1e-3 off
     (``benchmarks/zernike_routes.py``). Programs for Seidel designs and for Zernike designs
     of Seidel's degree keep ``BALANCED_GRID``."""
-    from jmse_jax import _merit
-
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
     ab = jj.Zernike([0.8701630593005899, -1.770897977784089], noll=(4, 28))
     route, reference = _route_and_reference(ab, 0.3, signal, noise)
@@ -784,9 +796,7 @@ def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_ru
     assert abs(alone / reference - 1.0) > 2e-3
 
     def balanced_plan(design, preset="default"):
-        static, _ = _merit._prepare((design, 0.5, 0.3, signal, noise),
-                                    jj.jmse_options(preset))
-        return _merit._base_plans(static, design)[-1][0]
+        return _base_plans(design, 0.3, preset)[-1][0]
 
     for design in (ab, jj.Zernike([0.1], noll=(16,))):
         for preset in ("default", "high"):
@@ -818,23 +828,17 @@ def test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes():
     ``HIGH_BALANCED_GRID``'s nodes, and the default's ``BALANCED_GRID``'s."""
     from jmse_jax import _merit
 
-    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
     ab = HIGH_BALANCED_ZERNIKE
-
-    def plans(design, preset="high"):
-        static, inputs = _merit._prepare((design, 0.5, 0.2, signal, noise),
-                                         jj.jmse_options(preset))
-        return static, inputs, _merit._base_plans(static, design)
-
-    static, inputs, high_plans = plans(ab)
-    index, _, _, strength, _ = _merit._concrete_choice(static, *inputs[:3])
-    assert int(index) == len(high_plans) - 1
-    assert _merit.STEEP_SLOPE < float(strength) / (math.sqrt(2.0) * 0.2) < _merit.CHECKED_SLOPE
+    high_plans = _base_plans(ab, 0.2, "high")
+    index, _, strength, _ = _plan_choice(ab, 0.2, "high")
+    assert index == len(high_plans) - 1
+    assert _merit.STEEP_SLOPE < strength / (math.sqrt(2.0) * 0.2) < _merit.CHECKED_SLOPE
     balanced = high_plans[-1][0]
     assert balanced["nodes"] == jj.HIGH_DEGREE_NODES
     assert balanced["overlap_nodes"] == jj.DEGREE_OVERLAP["overlap_nodes"]
-    assert plans(jj.Seidel(w020=1.0))[2][-1][0]["nodes"] == jj.HIGH_BALANCED_GRID["nodes"]
-    assert plans(ab, "default")[2][-1][0]["nodes"] == jj.BALANCED_GRID["nodes"]
+    assert (_base_plans(jj.Seidel(w020=1.0), 0.2, "high")[-1][0]["nodes"]
+            == jj.HIGH_BALANCED_GRID["nodes"])
+    assert _base_plans(ab, 0.2)[-1][0]["nodes"] == jj.BALANCED_GRID["nodes"]
 
 
 # Slow: three Zernike programs of "high"'s size (about 45 s on the CI machine).

@@ -541,17 +541,16 @@ def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
     ``value_and_grad`` under ``vmap``: the next test (slow); forward mode and the Hessian:
     the one after."""
     batch, fields = _cpu_vmap_batch(monkeypatch)
-    merit = _cpu_merit
-    values = jax.jit(jax.vmap(merit))(batch, fields)
-    single = jax.jit(merit)
+    values = jax.jit(jax.vmap(_cpu_merit))(batch, fields)
+    single = jax.jit(_cpu_merit)
     for i, (ab, f, _, _) in enumerate(CPU_VMAP_DESIGNS):
         assert float(values[i]) == float(single(jj.Seidel(**_coefficients(ab)), jnp.float64(f)))
     # A batch over u alone (the design and field broadcast to it).
     ab, f = jj.Seidel(**_coefficients(DESIGNS[1][0])), jnp.float64(DESIGNS[1][1])
     us = jnp.asarray([0.15, 0.2, 0.3])
-    over_u = jax.jit(jax.vmap(lambda u: merit(ab, f, u)))(us)
+    over_u = jax.jit(jax.vmap(lambda u: _cpu_merit(ab, f, u)))(us)
     for i, u in enumerate(us):
-        assert float(over_u[i]) == float(jax.jit(merit)(ab, f, u))
+        assert float(over_u[i]) == float(single(ab, f, u))
 
 
 # Slow: three more programs of the small tiers (about 70 s on the CI machine).
