@@ -18,10 +18,11 @@ Compared (``COMPARED``): ``jmse`` with the ``fast`` and ``default`` presets, the
 (which has them) and ``high`` without them, the explicit polar grid ``FINE`` with them, and on
 the axis the default without the one-ray plan's closed-form peaks
 (``jmse_jax._radial._zero_peaks``; the package before them). Findings feed ``CHECKED_SNR``
-and ``CHECKED_SNR_PEAKS`` (README, "Accuracy at low noise"). The near-axis designs (6 waves of
-defocus with 0.5 wave of coma or astigmatism at field 0.1, and a weaker mix at field 0.3) are
-the polar grid's hard case: their OTF nearly vanishes on rings. The references ``REFERENCE``
-and ``CHECK`` have the closed-form peaks too (and are compared with ``REFERENCE`` without).
+and ``CHECKED_SNR_PEAKS`` (docs/accuracy.md, "Accuracy at low noise"). The near-axis designs
+(6 waves of defocus with 0.5 wave of coma or astigmatism at field 0.1, and a weaker mix at
+field 0.3) are the polar grid's hard case: their OTF nearly vanishes on rings. The references
+``REFERENCE`` and ``CHECK`` have the closed-form peaks too (and are compared with ``REFERENCE``
+without).
 
 Gradients. The bank's gradient tests compare ``jax.grad`` with finite differences of the
 same grid, so they cannot see a grid that resolves neither. Here the presets' gradients in

@@ -80,11 +80,11 @@ __all__ = [
 U_MAX = 1.5
 
 #: The largest ``aberration_strength`` at which the default's tiers (and ``"high"``) were
-#: checked (README, "The adaptive default"). A concrete design beyond it gets a
+#: checked (docs/accuracy.md, "The adaptive default"). A concrete design beyond it gets a
 #: ``UserWarning`` from ``jmse``. ``"fast"`` has no bound of its own: it is percent-level off
-#: on some designs well inside this (README, "Accuracy and speed").
+#: on some designs well inside this (docs/accuracy.md, "The `fast` preset").
 CHECKED_STRENGTH = 25.0
-#: The same for rotationally symmetric designs, which take the one-ray plans (README).
+#: The same for rotationally symmetric designs, which take the one-ray plans (docs/accuracy.md).
 CHECKED_STRENGTH_ONE_RAY = 45.0
 #: The largest wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius] at
 #: which the default's tiers and one-ray plans were checked: ``aberration_strength`` is the
@@ -127,8 +127,8 @@ CHECKED_CANCELLATION = 7.0
 #: ``MarkovSignal(1, 5)``, whose ``S_x(0)`` is 157; the bank's lowest noise, 1e-4, is
 #: 1.6e6). Beyond it the peaks of ``S_e`` where the OTF nearly vanishes on a ring (designs
 #: near rotational symmetry), of width ``~ sqrt(S_n / S_x)``, grow narrower than the fine
-#: grids resolve (README, "Accuracy at low noise"); a concrete call that takes a polar grid
-#: of a preset gets a ``UserWarning``. Rotationally symmetric designs are held to
+#: grids resolve (docs/accuracy.md, "Accuracy at low noise"); a concrete call that takes a
+#: polar grid of a preset gets a ``UserWarning``. Rotationally symmetric designs are held to
 #: ``CHECKED_SNR_PEAKS`` instead: their one-ray plans integrate those peaks in closed form
 #: (single terms checked to a peak ratio of 1.6e16; defocus balanced against spherical
 #: aberration within 7e-5 up to 1.6e8 but 1.4e-2 off at 1.6e10, ``balanced_one_ray.py``).
@@ -406,7 +406,7 @@ PRESETS: dict[str, dict] = {
     # bank (3.1e-2) and on 40 random designs of the paper's singlet space against ``high``
     # (2.7e-5); its one-ray plan keeps 24 (``_radial._MIN_ALONG``). No accuracy bound: on
     # the stored calibration designs its worst error is 1.8e-3 at strength 1-3 and 1.4e-2
-    # at 3-5 (README); for an optimiser's steps and a sweep's survey.
+    # at 3-5 (docs/accuracy.md); for an optimiser's steps and a sweep's survey.
     "fast": dict(
         quadrature="polar", nodes=(24, 16), se_nodes=(400, 120), otf_method="overlap",
         overlap_nodes=(28, 16), tiers=None, radial=True,
@@ -1651,8 +1651,8 @@ def jmse(
     ``UserWarning`` unless grid options are given, and so does a peak ``max S_x / S_n``
     above ``CHECKED_SNR`` (2e6; ``CHECKED_SNR_PEAKS``, 2e8, with ``peaks`` or for a
     rotationally symmetric design, whose one-ray plan integrates them in closed form): where
-    the OTF nearly vanishes on a ring the peaks of ``S_e`` outgrow the grids (README,
-    "Accuracy at low noise").
+    the OTF nearly vanishes on a ring the peaks of ``S_e`` outgrow the grids
+    (docs/accuracy.md, "Accuracy at low noise").
     Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
     under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u``, the spectra's
     parameters) give ``+inf`` (never NaN) with zero gradient.
