@@ -602,8 +602,8 @@ def builtin_bench(repeats: int = 5) -> dict:
     results, best = _warm_times(programs, (ab,), rounds=repeats, calls=1)
     rows = {}
     for name, _ in cases:
-        value, t_v, t_vg = results[name, "value"], best[name, "value"], best[
-            name, "value_and_grad"]
+        value = results[name, "value"]
+        t_v, t_vg = best[name, "value"], best[name, "value_and_grad"]
         rows[name] = dict(jmse=float(value), time_value_s=t_v, time_value_and_grad_s=t_vg)
         print(f"{name:<16}{float(value):>14.7e}{t_v * 1e3:>10.2f}ms{t_vg * 1e3:>11.2f}ms",
               flush=True)
