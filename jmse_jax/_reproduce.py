@@ -47,24 +47,33 @@ def fig1_spectra():
     return MarkovSignal(1.0, 5.0), WhiteNoise(1e-3)
 
 
-def _warm_times(programs: dict, args: tuple, rounds: int, calls: int = 5) -> tuple[dict, dict]:
-    """Results and warm times of jitted ``programs`` (name -> function) at ``args``.
+def _warm_times(methods, args: tuple, rounds: int, calls: int = 5) -> dict:
+    """JMSE and warm times of each method (``(name, function)`` pairs) at ``args``: a row
+    ``jmse``, ``time_value_s``, ``time_value_and_grad_s`` per name.
 
-    Each program's first call compiles it; then ``rounds`` rounds run the programs in turn,
-    each ``calls`` times, and a program's time is its fastest call (the least disturbed by
-    other work on the host). Taking the programs in alternation spreads the host's drift over
-    them alike: on a shared 2-core host, in three fresh processes each, the default's value
-    over B = 64's at the Fig. 1 point read 2.96-5.41 with each program timed in one run of 11
-    calls, and 2.52-2.94 with 11 rounds of 5 calls in alternation."""
-    results = {name: jax.block_until_ready(fn(*args)) for name, fn in programs.items()}
+    The jitted value and ``value_and_grad`` of every method are compiled by their first call;
+    then ``rounds`` rounds run the programs in turn, each ``calls`` times, and a program's
+    time is its fastest call (the least disturbed by other work on the host). Taking the
+    programs in alternation spreads the host's drift over them alike: on a shared 2-core
+    host, in three fresh processes each, the default's value over B = 64's at the Fig. 1
+    point read 2.96-5.41 with each program timed in one run of 11 calls, and 2.52-2.94 with
+    11 rounds of 5 calls in alternation."""
+    programs = {}
+    for name, fn in methods:
+        programs[name, "value_and_grad"] = jax.jit(jax.value_and_grad(fn))
+        programs[name, "value"] = jax.jit(fn)
+    results = {key: jax.block_until_ready(fn(*args)) for key, fn in programs.items()}
     best = dict.fromkeys(programs, math.inf)
     for _ in range(rounds):
-        for name, fn in programs.items():
+        for key, fn in programs.items():
             for _ in range(calls):
                 start = time.perf_counter()
                 jax.block_until_ready(fn(*args))
-                best[name] = min(best[name], time.perf_counter() - start)
-    return results, best
+                best[key] = min(best[key], time.perf_counter() - start)
+    return {name: dict(jmse=float(results[name, "value_and_grad"][0]),
+                       time_value_s=best[name, "value"],
+                       time_value_and_grad_s=best[name, "value_and_grad"])
+            for name, _ in methods}
 
 
 def fig1_comparison(rounds: int = 5, log: Callable = print) -> dict:
@@ -76,18 +85,9 @@ def fig1_comparison(rounds: int = 5, log: Callable = print) -> dict:
     # constants: at this point the default's warm times were then about 2 % lower and the
     # baseline's 6 % (one process, 15 alternated rounds).
     args = (Seidel(**FIG1), FIG1_FIELD, FIG1_U, *fig1_spectra())
-    methods = (("baseline B=64", functools.partial(baseline_jmse, B=64)),
-               ("jmse default", jmse))
-    programs = {}
-    for name, fn in methods:
-        programs[name, "value_and_grad"] = jax.jit(jax.value_and_grad(fn))
-        programs[name, "value"] = jax.jit(fn)
     calls = 5
-    results, best = _warm_times(programs, args, rounds, calls)
-    rows = {name: dict(jmse=float(results[name, "value_and_grad"][0]),
-                       time_value_s=best[name, "value"],
-                       time_value_and_grad_s=best[name, "value_and_grad"])
-            for name, _ in methods}
+    rows = _warm_times((("baseline B=64", functools.partial(baseline_jmse, B=64)),
+                        ("jmse default", jmse)), args, rounds, calls)
     log("Fig. 1 operating point of Berkner & Shroff (field 0.95, u = 0.2,"
         " MarkovSignal(1, 5), WhiteNoise(1e-3)); float64")
     log(f"{'method':<16}{'JMSE':>14}{'rel. err':>11}{'value':>11}{'value+grad':>13}")
