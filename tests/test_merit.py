@@ -360,11 +360,26 @@ def _stacked_quadrant_merit():
 
 
 def test_gradient_of_a_wavefront_not_even_in_x_through_both_quadrants():
-    """The derivatives through the stacked quadrants (a wavefront not even in x). Oracles:
-    central differences of the same program, and the turn by 90 degrees of the test above
-    (Z7 is Z8 turned, so the merit of (Z4, Z7, Z11) is that of (Z4, Z8, Z11) at the same
-    coefficients, whose even wavefront takes one quadrant: equal gradients in the
-    coefficients and in u). Z7 = 0, where the design is symmetric: the next test (slow)."""
+    """The derivatives through the stacked quadrants (a wavefront not even in x), against
+    central differences of the same program. The turn by 90 degrees: the next test (slow);
+    Z7 = 0, where the design is symmetric: the one after (slow)."""
+    merit = _stacked_quadrant_merit()
+    theta = np.array([0.4, 0.6, -0.3, 0.3])
+    along_x = np.asarray(merit(jnp.asarray(theta), coma=7)[1])
+    scale = np.max(np.abs(along_x))
+    assert np.all(np.isfinite(along_x)) and np.all(np.abs(along_x) > 1e-6 * scale)
+    fd = np.array([oracles.richardson_difference(lambda t: merit(jnp.asarray(t), coma=7)[0],
+                                                 theta, i, 1e-4) for i in range(4)])
+    np.testing.assert_allclose(along_x, fd, rtol=1e-6, atol=1e-9 * scale)
+
+
+# Slow: a second Zernike program (about 35 s on the CI machine); the stacked quadrants'
+# derivatives keep their default-run check in the test above.
+@pytest.mark.slow
+def test_gradient_through_both_quadrants_equals_the_turned_design():
+    """Z7 is Z8 turned by 90 degrees, so the merit of (Z4, Z7, Z11) is that of (Z4, Z8, Z11)
+    at the same coefficients, whose even wavefront takes one quadrant: equal gradients in
+    the coefficients and in u."""
     merit = _stacked_quadrant_merit()
     theta = np.array([0.4, 0.6, -0.3, 0.3])
     along_x = np.asarray(merit(jnp.asarray(theta), coma=7)[1])
@@ -372,9 +387,6 @@ def test_gradient_of_a_wavefront_not_even_in_x_through_both_quadrants():
     scale = np.max(np.abs(along_x))
     assert np.all(np.isfinite(along_x)) and scale > 0
     np.testing.assert_allclose(along_x, along_y, rtol=1e-9, atol=1e-12 * scale)
-    fd = np.array([oracles.richardson_difference(lambda t: merit(jnp.asarray(t), coma=7)[0],
-                                                 theta, i, 1e-4) for i in range(4)])
-    np.testing.assert_allclose(along_x, fd, rtol=1e-6, atol=1e-9 * scale)
 
 
 # Slow: two more Zernike programs (about 50 s on the CI machine); the stacked quadrants'
@@ -385,7 +397,7 @@ def test_gradient_through_both_quadrants_where_the_odd_term_vanishes():
     indices), and the derivative in Z7 is zero: mirroring x turns Z7 into -Z7 and leaves the
     band as it is. There the design is rotationally symmetric, and a plain call would take
     the one-ray plan (its derivatives: ``test_radial``), so the polar grid is given
-    explicitly (``plane``). Oracles as in the test above."""
+    explicitly (``plane``). Oracles as in the two tests above."""
     merit = _stacked_quadrant_merit()
     theta = np.array([0.4, 0.0, -0.3, 0.3])
     along_x = np.asarray(merit(jnp.asarray(theta), coma=7, plane=True)[1])

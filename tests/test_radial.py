@@ -136,7 +136,10 @@ def test_one_ray_equals_polar_grid(ab, field, u):
     assert value == pytest.approx(_planar(ab, field, u), rel=1e-9)
 
 
-@pytest.mark.parametrize("preset, rtol", [("fast", 1e-4), ("default", 1e-9), ("high", 1e-9)])
+# "high" slow: its program compiles for about 30 s on the CI machine (its Fig. 1 value
+# stays in the default run, tests/test_merit.py).
+@pytest.mark.parametrize("preset, rtol", [("fast", 1e-4), ("default", 1e-9),
+                                          pytest.param("high", 1e-9, marks=pytest.mark.slow)])
 def test_every_preset_resolves_the_ridges_of_a_high_snr_design(preset, rtol):
     """Noise 1e-4 and 6 waves of defocus: S_e has narrow ridges along the OTF's zeros. The
     bank's reference (one ray at 4x the default's fine count, within 2.2e-7 of the polar
@@ -238,6 +241,11 @@ def _high_route(ab, field, u, noise, expected, rtol, own, off):
     return route
 
 
+# Slow: ``"high"``'s routes off its own grid (balanced, one ray, steep) compile the preset's
+# program and their references, about 80 s together on the CI machine; the default's routes
+# keep their checks in the default run, and ``"high"``'s Fig. 1 value and its strongest bank
+# case theirs (tests/test_merit.py).
+@pytest.mark.slow
 def test_high_takes_its_balanced_grid_where_terms_cancel():
     """``W = c (rho^2 - 0.7 rho^4)`` at u = 0.2, strength 15, a hair off the axis: ``"high"``'s
     own grid was 2.6e-1 off there (``benchmarks/balanced_polar.py``). The preset takes its
@@ -252,6 +260,7 @@ def test_high_takes_its_balanced_grid_where_terms_cancel():
     assert route["balanced"] and route["tier"] is None and not route["one_ray"]
 
 
+@pytest.mark.slow  # as the test above
 def test_high_one_ray_plan_on_many_waves_on_the_axis():
     """32 waves of defocus on the axis at u = 0.5 (strength 45, slope 64): ``"high"``'s one
     ray with its own counts (overlap rule (48, 48)) was 1.5e-1 off at noise 1e-4 (5.1e-1 at
@@ -269,6 +278,7 @@ SMALL_U_REFERENCE = dict(nodes=(160, 96), se_nodes=(8000, 1920), overlap_nodes=(
                          overlap_floor=96)
 
 
+@pytest.mark.slow  # as the tests above
 def test_high_takes_its_steep_grid_on_many_waves_at_small_u():
     """25 waves of coma at u = 0.3 (slope 58, past ``STEEP_SLOPE``): ``"high"``'s own grid was
     1.7e-2 off (``benchmarks/high_steep.py``). The preset takes its steep grid
@@ -352,6 +362,10 @@ def test_the_peak_correction_matters(monkeypatch):
     assert value == pytest.approx(expected, rel=1e-8)
 
 
+# Slow: a float32 program of its own (about 20 s on the CI machine); float32 keeps its
+# default-run check through the tier switch in tests/test_tiers.py
+# (``test_float32_design_with_float64_spectra_differentiates``).
+@pytest.mark.slow
 def test_float32_at_high_snr_on_the_axis():
     """float32 through the peak correction (the fast preset's one-ray plan, whose correction
     is the default's): the value within 1e-4 of the float64 quad reference and a finite
@@ -589,7 +603,10 @@ def test_second_derivative_in_the_field_on_the_axis():
     assert float(jax.jit(jax.grad(merit))(0.0)) == 0.0  # even in h
 
 
-@pytest.mark.parametrize("noll", [(4, 6, 11, 12), (4, 6, 11, 14)])
+# Z14's case slow: two more Zernike programs (about 17 s on the CI machine); the polar
+# grid's Zernike derivatives keep their default-run check in tests/test_merit.py.
+@pytest.mark.parametrize("noll", [(4, 6, 11, 12),
+                                  pytest.param((4, 6, 11, 14), marks=pytest.mark.slow)])
 def test_zernike_derivatives_off_the_symmetric_terms(noll):
     """A Zernike set with zero non-radial terms takes the one-ray plan for its value.
     Without a term cos(4k theta) (Z6 and Z12 are of m = 2) the one ray's first derivatives

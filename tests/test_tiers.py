@@ -537,15 +537,24 @@ def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
     """On CPU ``vmap`` of ``jmse`` runs the designs one at a time
     (``SEQUENTIAL_VMAP_BACKENDS``): the tiers' vectorised dispatch is never reached (it
     raises here), and every design, the one whose terms cancel (balanced grid) included,
-    gets bit for bit what it gets alone, in a batch over designs and in one over ``u`` only.
-    ``value_and_grad`` under ``vmap``: the next test (slow); forward mode and the Hessian:
-    the one after."""
+    gets bit for bit what it gets alone, in a batch over designs. A batch over ``u`` only:
+    the next test (slow); ``value_and_grad`` under ``vmap``: the one after (slow); forward
+    mode and the Hessian: the one after that."""
     batch, fields = _cpu_vmap_batch(monkeypatch)
     values = jax.jit(jax.vmap(_cpu_merit))(batch, fields)
     single = jax.jit(_cpu_merit)
     for i, (ab, f, _, _) in enumerate(CPU_VMAP_DESIGNS):
         assert float(values[i]) == float(single(jj.Seidel(**_coefficients(ab)), jnp.float64(f)))
-    # A batch over u alone (the design and field broadcast to it).
+
+
+# Slow: two more programs of the small tiers (about 25 s on the CI machine); ``vmap`` over
+# designs on CPU keeps its default-run check in the test above.
+@pytest.mark.slow
+def test_vmap_over_u_alone_runs_design_by_design_on_cpu(monkeypatch):
+    """A batch over ``u`` alone (the design and field broadcast to it), as the test above:
+    each ``u`` bit for bit what it gets alone."""
+    _cpu_vmap_batch(monkeypatch)
+    single = jax.jit(_cpu_merit)
     ab, f = jj.Seidel(**_coefficients(DESIGNS[1][0])), jnp.float64(DESIGNS[1][1])
     us = jnp.asarray([0.15, 0.2, 0.3])
     over_u = jax.jit(jax.vmap(lambda u: _cpu_merit(ab, f, u)))(us)
