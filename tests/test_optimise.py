@@ -9,7 +9,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-from test_tiers import SMALL_TIERS, _tiers_without_one_ray  # noqa: E402
+from small_tiers import SMALL_TIERS, tiers_without_one_ray  # noqa: E402
 
 import jmse_jax  # noqa: E402
 from jmse_jax import lens as jl  # noqa: E402
@@ -122,11 +122,11 @@ def test_default_preset_merit_is_the_field_mean_of_jmse(monkeypatch):
     and gradient equal the mean over the fields of ``jmse`` and of its gradient, taken field
     by field through the lens's Seidel sums by the chain rule (an on-axis, a middle and an
     outer field). The default's tiers are two small ones here (``SMALL_TIERS`` of
-    ``tests/test_tiers.py`` with the first up to strength 2, so that the field on the axis
+    ``tests/small_tiers.py`` with the first up to strength 2, so that the field on the axis
     takes it and the others the second), without the one-ray plans: the same dispatch,
     field by field, in programs that compile in seconds (the default's own lens program
     took 54 s of compilation on the CI machine)."""
-    _tiers_without_one_ray(monkeypatch, ((2.0, *SMALL_TIERS[0][1:]), SMALL_TIERS[1]))
+    tiers_without_one_ray(monkeypatch, ((2.0, *SMALL_TIERS[0][1:]), SMALL_TIERS[1]))
     fields = (0.0, 0.7, 1.0)
     signal, noise = jmse_jax.MarkovSignal(1.0, 5.0), jmse_jax.WhiteNoise(1e-3)
 
