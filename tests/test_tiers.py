@@ -412,6 +412,7 @@ def _small_tiers_design_by_design(monkeypatch, balanced=None):
 
     monkeypatch.setattr(_merit, "_batched_tier", vectorised)
 
+
 def test_float32_design_with_float64_spectra_differentiates(monkeypatch):
     """A float32 design with the signal and noise given as Python floats (float64 with x64
     on): the tier switch's derivative rule returns a float32 tangent (it raised a dtype
@@ -527,7 +528,7 @@ def test_vmap_runs_design_by_design_on_cpu(monkeypatch):
 def test_vmap_over_u_alone_runs_design_by_design_on_cpu(monkeypatch):
     """A batch over ``u`` alone (the design and field broadcast to it), as the test above:
     each ``u`` bit for bit what it gets alone."""
-    _cpu_vmap_batch(monkeypatch)
+    _small_tiers_design_by_design(monkeypatch, SMALL_BALANCED)
     single = jax.jit(_cpu_merit)
     ab, f = jj.Seidel(**_coefficients(DESIGNS[1][0])), jnp.float64(DESIGNS[1][1])
     us = jnp.asarray([0.15, 0.2, 0.3])
