@@ -5,7 +5,7 @@ Run from the repository root (normally through ``benchmarks/run_all.py``)::
     .venv/bin/python benchmarks/accuracy_speed.py            # full (~15 min on 2 cores)
     .venv/bin/python benchmarks/accuracy_speed.py --quick    # a small subset (< 2 min)
 
-Methods: the paper's square-grid baseline ``baseline_jmse`` at B = 32 ... 512; the presets
+Methods: the paper's square-grid baseline ``baseline_jmse`` at B = 32 ... 2048; the presets
 ``fast``, ``default`` and ``high``; each OTF engine at the default quadrature; each frequency
 quadrature at p = 4 ... 64 with the OTF computed directly at its nodes (overlap engine with
 the high preset's ``overlap_nodes``, so the quadrature's error dominates).
@@ -16,7 +16,7 @@ coefficients) and of a batch of 625 designs (``lax.map`` one design at a time, a
 runs on CPU; a 25 x 25 grid in ``w020`` and ``w222`` around the paper's Fig. 1 point); and
 the compile times. ``fast`` and the default also run in float32 (arguments cast on entry,
 errors against the same float64 references), and so does the B = 64 baseline. The methods
-behind the headline ratios (the B = 64 and B = 512 baselines, ``fast`` and the default) and
+behind the headline ratios (the B = 64, 512 and 2048 baselines, ``fast`` and the default) and
 the float32 default and B = 64 are then timed again in alternation, so that the host's drift
 between minutes cannot enter the ratios (``alternate_headline_timings``). The adaptive
 default is also timed on every bank case, by tier. Writes
@@ -93,9 +93,19 @@ def _polar_otf_nodes(nodes):
     return 2 * nodes[0] * nodes[1]
 
 
+#: The baseline's grid sizes in a full run. Issue 3 names B = 32 ... 512; B = 1024 and 2048
+#: are measured as well, so that when no B reaches the default's worst error the
+#: equal-accuracy speed-up is bounded from below by a baseline that has been run (see
+#: ``headlines``). B = 2048 is a 4096 x 4096 FFT pair: about 0.6 s per value on 2 cores.
+BASELINE_SIZES = (32, 64, 128, 256, 512, 1024, 2048)
+
+#: The grid size at which issue 3 asks for the ratio when no tested B reaches the default.
+STAND_IN_B = 512
+
+
 def methods(quick: bool) -> list[Method]:
     out = []
-    for B in ((32, 64, 128) if quick else (32, 64, 128, 256, 512)):
+    for B in ((32, 64, 128) if quick else BASELINE_SIZES):
         out.append(Method(f"baseline B={B}", "baseline", _baseline(B), B, dict(B=B)))
     for preset in (("fast", "default") if quick else ("fast", "default", "high")):
         options = jj.jmse_options(preset)
@@ -302,8 +312,13 @@ def default_by_tier(cases) -> dict:
 
 
 #: Methods re-timed in alternation for the headline ratios (``alternate_headline_timings``).
-HEADLINE_METHODS = ("baseline B=64", "baseline B=512", "preset fast", "preset default",
-                    "preset default float32", "baseline B=64 float32")
+HEADLINE_METHODS = ("baseline B=64", "baseline B=512", "baseline B=2048", "preset fast",
+                    "preset default", "preset default float32", "baseline B=64 float32")
+
+#: In the alternation, a method whose solo value takes longer than this is called once per
+#: round instead of ``calls`` times (B = 2048 takes about 0.6 s a value and 1.7 s a
+#: value_and_grad; its median then comes from ``rounds`` calls).
+SLOW_CALL_S = 0.05
 
 
 def alternate_headline_timings(rows, method_list, timing_case, rounds: int = 9,
@@ -315,7 +330,8 @@ def alternate_headline_timings(rows, method_list, timing_case, rounds: int = 9,
     3.4 ms in two runs ten minutes apart), which enters a ratio of two such times in full.
     Here each round calls every method ``calls`` times (value, then value_and_grad), for
     ``rounds`` rounds, so that a slow minute slows all of them alike; each method's value
-    and value_and_grad time is the median of its ``rounds * calls`` calls. The rows of these
+    and value_and_grad time is the median of its ``rounds * calls`` calls (of ``rounds``
+    calls for a method slower than ``SLOW_CALL_S``). The rows of these
     methods take these times (``timing: "alternated"``; the times of the solo run are kept
     as ``solo_value_s`` and ``solo_value_and_grad_s``), so the headlines use them.
     """
@@ -332,10 +348,12 @@ def alternate_headline_timings(rows, method_list, timing_case, rounds: int = 9,
         jax.block_until_ready(vag_fn(*args))
         compiled[method.name] = (value_fn, vag_fn)
     times = {name: ([], []) for name in compiled}
+    n_calls = {name: 1 if by_name[name]["value_s"] > SLOW_CALL_S else calls
+               for name in compiled}
     for _ in range(rounds):
         for name, fns in compiled.items():
             for fn, out in zip(fns, times[name], strict=True):
-                for _ in range(calls):
+                for _ in range(n_calls[name]):
                     start = time.perf_counter()
                     jax.block_until_ready(fn(*args))
                     out.append(time.perf_counter() - start)
@@ -350,7 +368,8 @@ def alternate_headline_timings(rows, method_list, timing_case, rounds: int = 9,
                              value_and_grad_s=row["value_and_grad_s"],
                              value_and_grad_min_s=min(vag_t),
                              solo_value_s=row["solo_value_s"],
-                             solo_value_and_grad_s=row["solo_value_and_grad_s"])
+                             solo_value_and_grad_s=row["solo_value_and_grad_s"],
+                             calls=rounds * n_calls[name])
     return dict(rounds=rounds, calls=calls, methods=summary)
 
 
@@ -362,6 +381,7 @@ def headlines(rows) -> dict:
     if default is None or not baselines:
         return dict(note="default preset or baselines missing")
     out = dict(default_worst_error=default["worst_error"], default_value_s=default["value_s"],
+               default_value_and_grad_s=default["value_and_grad_s"],
                default_value_and_grad_over_value=default["value_and_grad_over_value"],
                value_and_grad_target_met=default["value_and_grad_over_value"] <= 2.5,
                default_batch_625_s=default["batch_625_s"])
@@ -373,17 +393,34 @@ def headlines(rows) -> dict:
             baseline_value_s=cheapest["value_s"],
             speedup=cheapest["value_s"] / default["value_s"], reached=True, target=100.0)
     else:
+        # No tested B reaches the default's worst error. Every B reaching it is larger than
+        # the largest tested one, and the baseline's time grows with B (one 2B x 2B FFT
+        # pair), so the largest tested B's time over the default's is a lower bound of the
+        # equal-accuracy speed-up; that bound is the headline. The ratio at B = 512, which
+        # issue 3 asks for in this case, is kept beside it.
         largest = baselines[-1]
+        stand_in = by_name.get(f"baseline B={STAND_IN_B}")
+        times_grow = all(a["value_s"] < b["value_s"]
+                         for a, b in zip(baselines, baselines[1:], strict=False))
         out["equal_accuracy"] = dict(
-            reached=False,
-            note=(f"no tested baseline B reaches the default's worst-case error "
-                  f"{default['worst_error']:.2e}; ratio given at the largest B"),
+            reached=False, lower_bound=times_grow,
+            note=(f"no tested baseline B up to {largest['parameter']} reaches the default's "
+                  f"worst-case error {default['worst_error']:.2e}"),
             baseline=largest["name"], baseline_worst_error=largest["worst_error"],
             baseline_value_s=largest["value_s"],
+            baseline_value_and_grad_s=largest["value_and_grad_s"],
             speedup=largest["value_s"] / default["value_s"],
+            value_and_grad_speedup=largest["value_and_grad_s"] / default["value_and_grad_s"],
             error_ratio_at_that_B=largest["worst_error"] / default["worst_error"],
-            target=100.0)
-    out["equal_accuracy"]["target_met"] = out["equal_accuracy"]["speedup"] >= 100.0
+            baseline_times_grow_with_B=times_grow, target=100.0)
+        if stand_in is not None and stand_in is not largest:
+            out["equal_accuracy"].update(
+                stand_in=stand_in["name"], stand_in_worst_error=stand_in["worst_error"],
+                stand_in_value_s=stand_in["value_s"],
+                stand_in_speedup=stand_in["value_s"] / default["value_s"])
+    ea = out["equal_accuracy"]
+    # Unreached, the ratio meets the target only as a lower bound (times growing with B).
+    ea["target_met"] = ea["speedup"] >= 100.0 and (ea["reached"] or ea["lower_bound"])
     b64 = by_name.get("baseline B=64")
     if b64 is not None:
         gain = dict(baseline_worst_error=b64["worst_error"], baseline_value_s=b64["value_s"],
@@ -467,12 +504,29 @@ def markdown(report) -> str:
                          f"{common.fmt_seconds(h['default_value_s'])}: **{ea['speedup']:.3g}×** "
                          f"(target ≥ 100×).")
         else:
-            lines.append(f"1. Equal-accuracy speed-up: {ea['note']}: {ea['baseline']} "
-                         f"(worst {_e(ea['baseline_worst_error'])}, "
-                         f"{ea['error_ratio_at_that_B']:.3g}× the default's error) takes "
-                         f"{common.fmt_seconds(ea['baseline_value_s'])} vs the default's "
-                         f"{common.fmt_seconds(h['default_value_s'])}: **{ea['speedup']:.3g}×** "
-                         f"(target ≥ 100×).")
+            bound = ("at least " if ea.get("lower_bound") else "")
+            text = (f"1. Equal-accuracy speed-up: {ea['note']}. {ea['baseline']} (worst "
+                    f"{_e(ea['baseline_worst_error'])}, {ea['error_ratio_at_that_B']:.3g}× the "
+                    f"default's error) takes {common.fmt_seconds(ea['baseline_value_s'])} vs "
+                    f"the default's {common.fmt_seconds(h['default_value_s'])}, so the "
+                    f"speed-up is **{bound}{ea['speedup']:.3g}×** (target ≥ 100×)")
+            if ea.get("lower_bound"):
+                text += (": a lower bound, since the baseline's worst error falls slowly "
+                         "with B (it is still that far off at the largest B tested), so a B "
+                         "that reaches the default's is far larger, and the baseline's time "
+                         "grows with B")
+            elif "lower_bound" in ea:
+                text += (": the tested baselines' times do not grow with B in this run, "
+                         "so this ratio is not a bound")
+            if "value_and_grad_speedup" in ea:
+                text += (f"; value_and_grad {common.fmt_seconds(ea['baseline_value_and_grad_s'])}"
+                         f" vs {common.fmt_seconds(h['default_value_and_grad_s'])}: "
+                         f"{bound}{ea['value_and_grad_speedup']:.3g}×")
+            if ea.get("stand_in"):
+                text += (f". At {ea['stand_in']} (worst {_e(ea['stand_in_worst_error'])}), "
+                         f"the ratio issue 3 names for this case: "
+                         f"{ea['stand_in_speedup']:.3g}×")
+            lines.append(text + ".")
         if et:
             text = (f"2. Equal-time accuracy gain: baseline B=64 worst "
                     f"{_e(et['baseline_worst_error'])} in "
