@@ -689,7 +689,8 @@ def pareto_plot(rows, path, floor=1e-16):
     ax.set_ylabel("worst-case relative error over the bank")
     ax.set_title("JMSE: error versus time")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    # Right of centre: the front runs along the lower left, the baseline to the upper right.
+    ax.legend(fontsize=8, loc="center right", bbox_to_anchor=(1.0, 0.4))
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
