@@ -317,12 +317,16 @@ HEADLINE_METHODS = ("baseline B=64", "baseline B=512", "preset fast", "preset de
                     "preset default float32", "baseline B=64 float32")
 
 
-def _compile_pair(method, args):
-    """The value's and value_and_grad's executables of ``method``, each called once."""
+def _compile_pair(method, args, cache: dict):
+    """The value's and value_and_grad's executables of ``method``, each called once; kept
+    in ``cache`` (by name), so that the two alternations compile the default once."""
+    if method.name in cache:
+        return cache[method.name]
     value_fn = jax.jit(method.fn).lower(*args).compile()
     vag_fn = jax.jit(jax.value_and_grad(method.fn, argnums=0)).lower(*args).compile()
     jax.block_until_ready(value_fn(*args))
     jax.block_until_ready(vag_fn(*args))
+    cache[method.name] = value_fn, vag_fn
     return value_fn, vag_fn
 
 
@@ -341,7 +345,7 @@ def _alternate(compiled, args, rounds, calls) -> dict:
 
 
 def alternate_headline_timings(rows, method_list, timing_case, rounds: int = 9,
-                               calls: int = 5) -> dict | None:
+                               calls: int = 5, cache: dict | None = None) -> dict | None:
     """Re-time the methods behind the headline ratios in alternation, in one time window.
 
     Each method is timed alone, one after the other, above; on this shared host the speed
@@ -358,7 +362,8 @@ def alternate_headline_timings(rows, method_list, timing_case, rounds: int = 9,
     if len(chosen) < 2:
         return None
     args = timing_case.arguments
-    compiled = {method.name: _compile_pair(method, args) for method in chosen}
+    cache = {} if cache is None else cache
+    compiled = {method.name: _compile_pair(method, args, cache) for method in chosen}
     times = _alternate(compiled, args, rounds, dict.fromkeys(compiled, calls))
     summary = {}
     for name, (value_t, vag_t) in times.items():
@@ -376,7 +381,7 @@ def alternate_headline_timings(rows, method_list, timing_case, rounds: int = 9,
 
 
 def bound_timings(rows, method_list, timing_case, rounds: int = 9,
-                  calls: int = 5) -> dict | None:
+                  calls: int = 5, cache: dict | None = None) -> dict | None:
     """The largest tested baseline and the default, alternated on their own.
 
     When no tested B reaches the default's worst error, headline 1 is the largest B's time
@@ -395,7 +400,8 @@ def bound_timings(rows, method_list, timing_case, rounds: int = 9,
     largest = max(baselines, key=lambda r: r["parameter"])
     chosen = {m.name: m for m in method_list if m.name in (largest["name"], "preset default")}
     args = timing_case.arguments
-    compiled = {name: _compile_pair(method, args) for name, method in chosen.items()}
+    cache = {} if cache is None else cache
+    compiled = {name: _compile_pair(method, args, cache) for name, method in chosen.items()}
     times = _alternate(compiled, args, rounds,
                        {name: 1 if name == largest["name"] else calls for name in compiled})
     med = {name: (statistics.median(v), statistics.median(g)) for name, (v, g) in times.items()}
@@ -735,11 +741,12 @@ def run(quick: bool = False, only: list[str] | None = None, tag: str = "",
               f"  compile {common.fmt_seconds(row['compile_s'])}  "
               f"[{time.perf_counter() - t0:.0f} s]", flush=True)
     print("the headline methods again, in alternation ...", flush=True)
-    alternated = alternate_headline_timings(rows, method_list, timing_case)
+    executables = {}  # the default's, compiled once for both alternations
+    alternated = alternate_headline_timings(rows, method_list, timing_case, cache=executables)
     bound = None
     if not quick:  # the quick subset's largest B is 128: its rows' own times serve
         print("the largest baseline and the default, in alternation ...", flush=True)
-        bound = bound_timings(rows, method_list, timing_case)
+        bound = bound_timings(rows, method_list, timing_case, cache=executables)
     tiered = None
     if not only or any("default" in word for word in only):
         print("the adaptive default on every bank case ...", flush=True)

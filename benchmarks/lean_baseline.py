@@ -26,13 +26,13 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
-import time
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
 import _common as common  # noqa: E402
+import accuracy_speed  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -63,15 +63,6 @@ def lean_baseline(B: int, u: float):
     return fn
 
 
-def _calls(fn, args, n):
-    out = []
-    for _ in range(n):
-        start = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        out.append(time.perf_counter() - start)
-    return out
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[512, 1024, 2048])
@@ -85,8 +76,7 @@ def main(argv=None) -> int:
 
     methods = {"default": jj.jmse}
     for B in args.sizes:
-        methods[f"baseline_jmse B={B}"] = (
-            lambda *a, B=B: jj.baseline_jmse(*a, B=B))
+        methods[f"baseline_jmse B={B}"] = accuracy_speed._baseline(B)
         methods[f"lean B={B}"] = lean_baseline(B, u)
     compiled, values = {}, {}
     for name, fn in methods.items():
@@ -95,12 +85,9 @@ def main(argv=None) -> int:
         jax.block_until_ready(vag_fn(*call_args))
         compiled[name] = (value_fn, vag_fn)
         print(f"{name:22s} {values[name]:.15e}", flush=True)
-    times = {name: ([], []) for name in compiled}
-    for _ in range(args.rounds):
-        for name, fns in compiled.items():
-            n = 5 if name == "default" or name.endswith("=512") else 1
-            for fn, out in zip(fns, times[name], strict=True):
-                out.extend(_calls(fn, call_args, n))
+    times = accuracy_speed._alternate(
+        compiled, call_args, args.rounds,
+        {name: 5 if name == "default" or name.endswith("=512") else 1 for name in compiled})
     med = {name: tuple(statistics.median(t) for t in pair) for name, pair in times.items()}
     d_value, d_vag = med["default"]
     rows = []
