@@ -9,6 +9,11 @@ whether, without a check, the first grid (or tier 0's grid, ``_TIER0_GRID``) is 
 as ``fast``'s own grid on designs of low strength, where ``fast`` could then take it by
 strength alone.
 
+The same study showed that ``fast``'s fine ``S_e`` rule was short of radial nodes at high
+SNR: its grid until 2026-12-03 (fine nodes (400, 120)) is kept here beside the present one
+((800, 48): fewer fine nodes, more of them along the rays,
+in the same time).
+
 On the 832 stored calibration designs (``results/calibrate_tiers.json`` and
 ``calibrate_tiers_kink.json``, with their converged references) this script evaluates the
 three fixed grids, jitted, and reports the worst and median relative error by
@@ -38,6 +43,9 @@ _FAST = PRESETS["fast"]
 GRIDS = {
     "fast": dict(nodes=_FAST["nodes"], se_nodes=_FAST["se_nodes"],
                  overlap_nodes=_FAST["overlap_nodes"], overlap_floor=_FAST["overlap_floor"]),
+    # ``fast``'s grid until 2026-12-03: the same OTF grid with fine S_e nodes (400, 120).
+    "fast until 2026-12-03": dict(nodes=(24, 16), se_nodes=(400, 120), overlap_nodes=(28, 16),
+                                  overlap_floor=24),
     "first grid": dict(_FIRST_GRID),
     "tier 0": dict(_TIER0_GRID),
 }

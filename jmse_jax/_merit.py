@@ -404,11 +404,15 @@ _PRESET_ONLY = ("tiers", "radial", "balanced", "steep", "ray")
 PRESETS: dict[str, dict] = {
     # 16 overlap nodes along the chords (20 until 2026-11-25): the same worst error on the
     # bank (3.1e-2) and on 40 random designs of the paper's singlet space against ``high``
-    # (2.7e-5); its one-ray plan keeps 24 (``_radial._MIN_ALONG``). No accuracy bound: on
-    # the stored calibration designs its worst error is 1.8e-3 at strength 1-3 and 1.4e-2
-    # at 3-5 (docs/accuracy.md); for an optimiser's steps and a sweep's survey.
+    # (2.7e-5); its one-ray plan keeps 24 (``_radial._MIN_ALONG``). Fine S_e nodes (800, 48)
+    # instead of (400, 120) since 2026-12-03: fewer fine nodes, in the same time, resolve the
+    # S_e ridges at high SNR better (``benchmarks/fast_grids.py``: on the stored calibration
+    # designs 4.1e-4 -> 2.0e-6 up to strength 1, 1.8e-3 -> 1.1e-3 at 1-3, 1.4e-2 -> 3.5e-3
+    # at 3-5, the same beyond; bank case fig1_defocus_m6_u_0.1_noise_1e-4 6.7e-4 -> 1.8e-4).
+    # No accuracy bound: beyond strength 5 its OTF grid binds (4.8e-2 at 5-8;
+    # docs/accuracy.md); for an optimiser's steps and a sweep's survey.
     "fast": dict(
-        quadrature="polar", nodes=(24, 16), se_nodes=(400, 120), otf_method="overlap",
+        quadrature="polar", nodes=(24, 16), se_nodes=(800, 48), otf_method="overlap",
         overlap_nodes=(28, 16), tiers=None, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=None, steep=None, ray=None,
     ),
