@@ -185,10 +185,13 @@ def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavel
             raise ValueError(f"field_weights must have a positive sum, got {field_weights!r}")
     if wavelengths is not None:
         check_range("wavelengths", wavelengths, 0.2, 20.0)
-        if np.ndim(wavelengths) != 1 or len(wavelengths) == 0:
+        # jnp.asarray first: a list of traced scalars (wavelengths as variables of a jitted
+        # caller) has no NumPy shape.
+        array = jnp.asarray(wavelengths, dtype)
+        if array.ndim != 1 or array.shape[0] == 0:
             raise ValueError(f"wavelengths must be a non-empty sequence of floats [µm], "
                              f"got {wavelengths!r}")
-        wavelengths = jnp.asarray(wavelengths, dtype)
+        wavelengths = array
     return fields, weights, wavelengths
 
 
@@ -405,7 +408,7 @@ class _Problem(eqx.Module):
         return lens_merit(
             lens, merit=self.merit, u=self.u, signal=self.signal, noise=self.noise,
             fields=self.fields, field_weights=self.field_weights,
-            wavelengths=None if self.wavelengths is None else list(self.wavelengths),
+            wavelengths=self.wavelengths,
             reference_scale=self.reference_scale, jmse_options=dict(self.jmse_items),
         )
 

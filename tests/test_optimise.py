@@ -14,7 +14,7 @@ from small_tiers import SMALL_TIERS, tiers_without_one_ray  # noqa: E402
 import jmse_jax  # noqa: E402
 from jmse_jax import lens as jl  # noqa: E402
 from jmse_jax._merit import _route  # noqa: E402
-from jmse_jax._optimise import lens_merit, optimise  # noqa: E402
+from jmse_jax._optimise import _get, _parse, _set, lens_merit, optimise  # noqa: E402
 
 FAST = {"preset": "fast"}
 VARIABLES = ("curvatures[0]", "stop_position", "image_shift")
@@ -173,6 +173,32 @@ def test_polychromatic_merit_rescales_band_and_spectra():
                             jmse_options=FAST))
     assert same == pytest.approx(mono, rel=1e-12)
     assert abs(got - mono) > 1e-3 * mono
+
+
+def test_polychromatic_optimise_reaches_a_minimum_of_its_merit(rms_optimum):
+    """optimise with wavelengths: they ride in the jitted objective as traced values (until
+    2026-12-03 that raised a TracerArrayConversionError in the argument checks). The RMS merit
+    keeps it cheap; the oracle is lens_merit, called on its own, at and around the result."""
+    wavelengths = (jl.FRAUNHOFER_F, jl.FRAUNHOFER_D, jl.FRAUNHOFER_C)
+    poly = optimise(start_design(), VARIABLES, f_number=4.6, merit="rms",
+                    wavelengths=wavelengths, jmse_options=FAST)
+    assert poly.result == "converged"
+    assert math.isfinite(poly.jmse)
+
+    def variance(lens):
+        return float(lens_merit(lens, merit="rms", wavelengths=wavelengths,
+                                reference_scale=poly.reference_scale, jmse_options=FAST))
+
+    at_result = variance(poly.lens)
+    assert poly.value == pytest.approx(at_result, rel=1e-12)
+    for name in VARIABLES:  # a minimum: a step either way in each variable costs merit
+        parsed = _parse(name, poly.lens)
+        for step in (-1e-3, 1e-3):
+            moved = _set(poly.lens, parsed, _get(poly.lens, parsed) + step)
+            assert variance(jl.solve_last_curvature(moved, 4.6)) > at_result, (name, step)
+    # Colour moves the optimum: the best focus of F, d and C is not that of d alone.
+    shift = poly.parameters["image_shift"] - rms_optimum.parameters["image_shift"]
+    assert abs(shift) > 0.01
 
 
 def test_rms_merit_is_the_closed_form():
