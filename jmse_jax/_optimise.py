@@ -550,9 +550,10 @@ def optimise(
         ``lambda N``: the pixel pitch and the scene stay fixed while the design changes.
     jmse_options : dict, optional
         Options of ``jmse`` for the objective. Default ``{"preset": "fast"}``: on the
-        paper's singlet it reaches the same optimum as ``preset="default"`` to about 10
-        digits (``benchmarks/optimise_singlet.py``) in a quarter of the time (4-9 s against
-        31-43 s per optimisation on a 2-core CPU). Pass ``{}`` for the default preset.
+        paper's singlet it reaches the optimum of ``preset="default"`` to 2e-7 in the
+        parameters and 2e-8 in the JMSE (``benchmarks/optimise_singlet.py``, 2026-12-03),
+        with a first call of 10 s against 81 s on a 2-core CPU (compilation included; later
+        starts take about a second either way). Pass ``{}`` for the default preset.
     f_number : float, optional
         Solve the last curvature at every step so the working F-number stays at this value
         (Zemax's F-number solve; the paper's "F/4.6 singlet"). Do not also vary that
