@@ -41,6 +41,9 @@ def main(argv=None) -> int:
     parser.add_argument("--designs", type=int, default=16)
     parser.add_argument("--seed", type=int, default=5)
     args = parser.parse_args(argv)
+    if args.designs < len(U_VALUES):  # designs go round the u values; each needs one
+        parser.error(f"--designs must be at least {len(U_VALUES)} (one per u value in "
+                     f"{U_VALUES}), got {args.designs}")
 
     strict = dict(problems.STRICT_OPTIONS)
     doubled = dict(strict, nodes=(strict["nodes"][0], 2 * strict["nodes"][1]),
