@@ -461,7 +461,7 @@ def headlines(rows, bound: dict | None = None) -> dict:
             value_and_grad_speedup=(src["baseline_value_and_grad_s"]
                                     / src["default_value_and_grad_s"]),
             error_ratio_at_that_B=largest["worst_error"] / default["worst_error"],
-            baseline_times_grow_with_B=times_grow, target=100.0)
+            target=100.0)
         if stand_in is not None and stand_in is not largest:
             out["equal_accuracy"].update(
                 stand_in=stand_in["name"], stand_in_worst_error=stand_in["worst_error"],

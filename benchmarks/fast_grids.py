@@ -29,11 +29,11 @@ from __future__ import annotations
 
 import json
 import statistics
-import time
 
 import _common as common  # turns on float64
 import jax
 import numpy as np
+from accuracy_speed import _alternate  # the headlines' alternation
 
 import jmse_jax as jj
 from jmse_jax._merit import _FIRST_GRID, _TIER0_GRID, PRESETS
@@ -81,14 +81,7 @@ def fig1_times(rounds: int = 9, calls: int = 5):
                           jax.jit(jax.value_and_grad(fn)).lower(*args).compile())
         for f in compiled[name]:
             jax.block_until_ready(f(*args))
-    times = {name: ([], []) for name in compiled}
-    for _ in range(rounds):
-        for name, fns in compiled.items():
-            for fn, out in zip(fns, times[name], strict=True):
-                for _ in range(calls):
-                    start = time.perf_counter()
-                    jax.block_until_ready(fn(*args))
-                    out.append(time.perf_counter() - start)
+    times = _alternate(compiled, args, rounds, dict.fromkeys(compiled, calls))
     return {name: dict(value_s=statistics.median(v), value_and_grad_s=statistics.median(g))
             for name, (v, g) in times.items()}
 
