@@ -59,10 +59,11 @@ EXACT = jax.lax.Precision.HIGHEST
 
 
 def safe_sqrt(x):
-    """``sqrt(max(x, 0))`` whose gradient is 0 (not inf/NaN) where ``x <= 0``."""
+    """``sqrt(max(x, 0))`` whose gradient is 0 (not inf/NaN) where ``x <= 0``; NaN stays
+    NaN (a NaN input must not come out as a plausible 0)."""
     positive = x > 0
     x_safe = jnp.where(positive, x, jnp.ones_like(x))
-    return jnp.where(positive, jnp.sqrt(x_safe), jnp.zeros_like(x))
+    return jnp.where(positive, jnp.sqrt(x_safe), jnp.where(jnp.isnan(x), x, jnp.zeros_like(x)))
 
 
 def safe_norm(x, y):

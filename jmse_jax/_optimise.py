@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import re
 import time
 import warnings
@@ -35,7 +36,7 @@ from .lens import (
     rms_wavefront_error,
     solve_last_curvature,
 )
-from .lens._paraxial import _raise_for, _status
+from .lens._paraxial import _all_finite, _raise_for, _status
 from .lens._seidel import _waves_from_traces
 
 __all__ = ["MERITS", "SOLVERS", "OptimisationResult", "lens_merit", "optimise"]
@@ -134,10 +135,13 @@ def lens_merit(
         raise TypeError(f"lens must be a jmse_jax.lens.Lens, got {type(lens)}")
     check_choice("merit", merit, MERITS)
     dtype = lens.ep_radius.dtype
-    fields, weights, wavelengths = _check_merit_arguments(
-        dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options)
-    if is_concrete(lens):
-        _check_lens_at(lens, wavelengths)
+    # Concrete arguments are checked now even inside a caller's jit, where the checks' own
+    # array operations would otherwise be staged out and give tracers.
+    with jax.ensure_compile_time_eval():
+        fields, weights, wavelengths = _check_merit_arguments(
+            dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options)
+        if is_concrete(lens):
+            _check_lens_at(lens, wavelengths)
     if reference_scale is not None:
         check_range("reference_scale", reference_scale, 0.0, None, low_inclusive=False)
         reference_scale = jnp.asarray(reference_scale, dtype)
@@ -195,11 +199,31 @@ def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavel
     return fields, weights, wavelengths
 
 
+def _check_bound(name, pair):
+    """``bounds[name]`` as ``(low, high)`` floats or None; ``ValueError`` for anything else."""
+    if not isinstance(pair, (tuple, list)) or len(pair) != 2:
+        raise ValueError(f"bounds[{name!r}] must be a pair (low, high) of floats or None, "
+                         f"got {pair!r}")
+    out = []
+    for side, value in zip(("low", "high"), pair, strict=True):
+        if value is not None:
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                    or math.isnan(value):
+                raise ValueError(f"bounds[{name!r}]'s {side} must be a real number or None, "
+                                 f"got {value!r}")
+            value = float(value)
+        out.append(value)
+    return tuple(out)
+
+
 def _freeze(options) -> tuple:
     """``jmse`` keyword options as a hashable (static) tuple of pairs."""
     items = []
     for key, value in sorted((options or {}).items()):
-        items.append((key, tuple(value) if isinstance(value, list) else value))
+        if isinstance(value, (list, np.ndarray)):
+            # A NumPy array (e.g. nodes=np.array([24, 16])) would be traced, not static.
+            value = tuple(np.asarray(value).tolist())
+        items.append((key, value))
     return tuple(items)
 
 
@@ -212,12 +236,15 @@ def _check_lens_at(lens, wavelengths):
     """Raise ``ValueError`` when the concrete ``lens`` is non-physical at its reference
     wavelength or at any of ``wavelengths`` (None: the reference only), naming the
     wavelength."""
-    _raise_for(_status_jit(lens), lens)
-    for wl in [] if wavelengths is None else wavelengths:
-        try:
-            _raise_for(_status_jit(lens, wl), lens, wl)
-        except ValueError as error:
-            raise ValueError(f"at wavelength {float(wl)!r} µm: {error}") from None
+    with jax.ensure_compile_time_eval():
+        _raise_for(_status_jit(lens), lens)
+        if wavelengths is None or not is_concrete(wavelengths):
+            return  # traced wavelengths: the merit says +inf where the lens fails
+        for wl in wavelengths:
+            try:
+                _raise_for(_status_jit(lens, wl), lens, wl)
+            except ValueError as error:
+                raise ValueError(f"at wavelength {float(wl)!r} µm: {error}") from None
 
 
 @eqx.filter_jit
@@ -240,12 +267,20 @@ def _merit_table(lens, merit, u, signal, noise, fields, wavelengths, reference_s
     signal = MarkovSignal(1.0, 5.0) if signal is None else signal
     noise = WhiteNoise(1e-3) if noise is None else noise
     dtype = lens.ep_radius.dtype
+    # A NaN or inf in a traced lens (a diverging optimiser): compute with finite stand-ins
+    # (flagged by ``ok`` below), which the gradient does not reach, so that the merit is
+    # +inf with a zero gradient rather than NaN.
+    finite = _all_finite(lens)
+    lens = jax.tree_util.tree_map(
+        lambda a: jnp.where(finite, a, jax.lax.stop_gradient(
+            jnp.where(jnp.isfinite(a), a, jnp.ones_like(a))))
+        if eqx.is_inexact_array(a) else a, lens)
     monochromatic = wavelengths is None
     wavelengths = [lens.wavelength] if monochromatic else list(wavelengths)
     reference = paraxial_trace(lens)
     traces = [reference if monochromatic else paraxial_trace(lens, wl) for wl in wavelengths]
     # Valid at the reference wavelength and at every wavelength averaged over.
-    ok = _status(lens, reference).ok
+    ok = _status(lens, reference).ok & finite
     if not monochromatic:
         for trace in traces:
             ok = ok & _status(lens, trace).ok
@@ -645,7 +680,7 @@ def optimise(
                                  f"{variables}")
         lower, upper = [], []
         for i, (name, p) in enumerate(zip(variables, parsed, strict=True)):
-            low, high = bounds.get(name, (None, None))
+            low, high = _check_bound(name, bounds.get(name, (None, None)))
             start = float(_get(lens, p))
             if low is not None and high is not None and not low < high:
                 raise ValueError(f"bounds[{name!r}] must satisfy low < high, got {(low, high)}")

@@ -456,7 +456,10 @@ def _warn_if_coarse(aberrations, nu_x, nu_y, field, nodes):
     s_max = float(np.max(np.hypot(np.asarray(nu_x), np.asarray(nu_y)), initial=0.0))
     if s_max <= 0.0:
         return
-    spread = float(_phase_spread(aberrations, jnp.asarray(field, float), min(s_max, 1.0)))
+    # Evaluated now even inside a caller's jit (constant inputs there).
+    with jax.ensure_compile_time_eval():
+        spread = float(_phase_spread(aberrations, jnp.asarray(field, float),
+                                     min(s_max, 1.0)))
     need = math.ceil(_SPREAD_SLOPE * spread + _SPREAD_OFFSET)
     if min(nodes) < need:
         warnings.warn(

@@ -59,7 +59,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._aberrations import AbstractAberrations
-from ._merit import U_MAX, _sanitise, jmse
+from ._merit import PRESETS, U_MAX, _sanitise, jmse
 from ._numerics import (
     abs2,
     all_finite,
@@ -521,6 +521,7 @@ def predicted_pixel_mse(
     0.0166752
     """
     _check_system(aberrations, field, u, signal, noise)
+    check_choice("jmse_preset", jmse_preset, tuple(PRESETS))
     if size is None:
         return PIXEL_MSE_PER_JMSE * jmse(aberrations, field, u, signal, noise,
                                          preset=jmse_preset)
@@ -729,6 +730,8 @@ def monte_carlo_mse(
     True
     """
     _check_system(aberrations, field, u, signal, noise)
+    if jmse_preset is not None:
+        check_choice("jmse_preset", jmse_preset, tuple(PRESETS))
     check_count("size", size, 3)
     if size % 2 == 0:
         raise ValueError(f"size must be an odd integer >= 3 (so the DFT cells tile the band), "

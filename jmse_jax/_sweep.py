@@ -319,8 +319,11 @@ def _host_batch(batch):
     leaves_with_paths, treedef = jax.tree_util.tree_flatten_with_path(batch)
     if not leaves_with_paths:
         raise ValueError("batch must contain at least one array leaf, got an empty pytree")
-    leaves, lengths = [], {}
+    leaves, lengths, weak = [], {}, []
     for path, leaf in leaves_with_paths:
+        # A Python float (e.g. a Seidel's zero coefficients) is weakly typed, as in jnp: it
+        # takes the float dtype of the batch's arrays rather than making them float64.
+        weak.append(isinstance(leaf, float) or bool(getattr(leaf, "weak_type", False)))
         arr = np.asarray(leaf)
         if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
             raise ValueError(
@@ -341,6 +344,12 @@ def _host_batch(batch):
     n = distinct[0]
     if n < 1:
         raise ValueError("batch must hold at least one design, got a leading length of 0")
+    strong = [a.dtype for a, w in zip(leaves, weak, strict=True)
+              if not w and np.issubdtype(a.dtype, np.floating)]
+    if strong:
+        common = np.result_type(*strong)
+        leaves = [a.astype(common) if w and np.issubdtype(a.dtype, np.floating) else a
+                  for a, w in zip(leaves, weak, strict=True)]
     # Scalars are shared by every design (e.g. the zero coefficients of a Seidel).
     leaves = [np.broadcast_to(a, (n,)).copy() if a.ndim == 0 else a for a in leaves]
     return jax.tree_util.tree_unflatten(treedef, leaves), n

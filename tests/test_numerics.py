@@ -25,6 +25,10 @@ def test_safe_sqrt_values_and_gradients():
         assert _grad(nm.safe_sqrt, point) == 0.0
     for point in (1e-12, 0.25, 4.0):
         assert _grad(nm.safe_sqrt, point) == pytest.approx(0.5 / math.sqrt(point), rel=1e-14)
+    # A NaN stays NaN (it came out as a plausible 0, which made the RMS merit of a NaN
+    # design its best value); in safe_norm too.
+    assert math.isnan(float(nm.safe_sqrt(jnp.asarray(np.nan))))
+    assert math.isnan(float(nm.safe_norm(jnp.asarray(np.nan), jnp.asarray(1.0))))
 
 
 def test_safe_norm_values_and_gradients():

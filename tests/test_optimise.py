@@ -2,6 +2,7 @@
 
 import math
 
+import equinox as eqx
 import jax
 
 jax.config.update("jax_enable_x64", True)
@@ -225,6 +226,51 @@ def test_non_physical_design_gives_inf_merit_and_finite_gradient():
         lens_merit(bad, merit="rms")
 
 
+@pytest.mark.parametrize("name", ["image_shift", "stop_position", "curvatures"])
+def test_nan_in_a_traced_lens_gives_inf_merit_and_zero_gradient(name):
+    """A NaN reaching a traced lens (a diverging optimiser): +inf with a zero gradient, as for
+    any non-physical design. The RMS merit was 0.0 (its best value) for a NaN image_shift,
+    and stop_position or a curvature gave NaN gradients."""
+    start = start_design()
+
+    @jax.jit
+    def merit(x):
+        value = jnp.where(jnp.arange(2) == 0, x, start.curvatures) if name == "curvatures" \
+            else x
+        return lens_merit(eqx.tree_at(lambda lens: getattr(lens, name), start, value),
+                          merit="rms")
+
+    x0 = start.curvatures[0] if name == "curvatures" else getattr(start, name)
+    assert float(merit(x0)) == pytest.approx(float(lens_merit(start, merit="rms")), rel=1e-12)
+    value, grad = jax.value_and_grad(merit)(jnp.asarray(jnp.nan))
+    assert math.isinf(float(value)) and float(grad) == 0.0
+    lens = eqx.tree_at(lambda lens: lens.image_shift, start, jnp.asarray(jnp.nan))
+    assert not bool(jl.lens_status(lens).finite) and not bool(jl.lens_status(lens).ok)
+
+
+def test_lens_merit_and_otf_under_jit_with_constant_inputs():
+    """A lens (or an otf design) closed over by the caller's jit is constant there: its
+    checks run at trace time instead of failing on the tracers of their own jitted parts."""
+    lens = start_design()
+    eager = float(lens_merit(lens, merit="rms", u=0.25, fields=(0.0, 0.7),
+                             field_weights=(1.0, 2.0), wavelengths=(0.4861, 0.6563)))
+    program = jax.jit(lambda u: lens_merit(lens, merit="rms", u=u, fields=(0.0, 0.7),
+                                           field_weights=(1.0, 2.0),
+                                           wavelengths=(0.4861, 0.6563)))
+    assert float(program(0.25)) == pytest.approx(eager, rel=1e-13)
+    bad = jl.Lens([0.2, -0.2], [0.3], [1.5, 1.0], ep_radius=1.5, field_angle=5.0)
+    with pytest.raises(ValueError, match="gap thickness, on the axis and at the edge"):
+        jax.jit(lambda u: lens_merit(bad, merit="rms", u=u))(0.2)
+    # jmse options given as NumPy arrays are static, as lists and tuples are.
+    options = {"preset": "fast", "nodes": np.array([24, 16])}
+    assert float(lens_merit(lens, merit="rms", jmse_options=options)) == pytest.approx(
+        float(lens_merit(lens, merit="rms")), rel=1e-14)
+    ab = jmse_jax.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198)
+    expected = complex(jmse_jax.otf(ab, 0.1, 0.05, 0.95))
+    assert complex(jax.jit(lambda s: s * jmse_jax.otf(ab, 0.1, 0.05, 0.95))(1.0)) \
+        == pytest.approx(expected, rel=1e-13)
+
+
 def test_glass_parameters_are_optimisation_variables():
     start = start_design()
     result = optimise(start, ("media[0].nd", "image_shift"), f_number=4.6, merit="rms",
@@ -260,6 +306,10 @@ def test_optimise_checks_the_merit_arguments_before_running():
         optimise(lens, "image_shift")
     with pytest.raises(ValueError, match=r"bounds\['image_shift'\] must be a pair"):
         optimise(lens, ("image_shift",), bounds={"image_shift": 1.0})
+    for side, pair in (("low", (float("nan"), None)), ("high", (None, "1"))):
+        with pytest.raises(ValueError, match=rf"bounds\['image_shift'\]'s {side} must be a "
+                                             rf"real number or None, got"):
+            optimise(lens, ("image_shift",), merit="rms", bounds={"image_shift": pair})
 
 
 def test_optimise_argument_errors():

@@ -269,10 +269,17 @@ def test_non_positive_noise_is_rejected():
     (dict(oversample=2), "oversample must be an odd integer"),
     (dict(sampling="point"), "oversample must be an odd integer >= 3"),
     (dict(sampling="box"), "sampling must be one of"),
+    (dict(jmse_preset="slow"), "jmse_preset must be one of 'fast', 'default', 'high', got "
+                               "'slow'"),
 ])
 def test_monte_carlo_rejects_bad_settings(kwargs, message):
     with pytest.raises(ValueError, match=message):
         jj.monte_carlo_mse(FIG1, 0.95, 0.2, MARKOV, NOISE, jax.random.key(0), **kwargs)
+
+
+def test_predicted_pixel_mse_names_its_preset_argument():
+    with pytest.raises(ValueError, match="jmse_preset must be one of 'fast', 'default', 'high'"):
+        jj.predicted_pixel_mse(FIG1, 0.95, 0.2, MARKOV, NOISE, jmse_preset="slow")
 
 
 def test_random_scene_rejects_bad_shape():

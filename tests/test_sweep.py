@@ -290,6 +290,23 @@ def test_bad_batches(batch, kwargs, match):
         jj.sweep(_toy, batch, progress=False, **kwargs)
 
 
+def test_float32_designs_keep_float32_with_python_float_defaults():
+    """A Seidel of float32 arrays keeps its other coefficients as Python floats (0.0); the
+    batch takes float32 from its arrays, as jnp (and a single jmse call) does, instead of
+    float64 from the Python floats."""
+    from jmse_jax._sweep import _host_batch
+
+    design = jj.Seidel(w020=np.linspace(-1.0, 1.0, 3).astype(np.float32), w131=np.float32(0.4))
+    batch, n = _host_batch((design, np.float32(0.7)))
+    assert n == 3
+    assert {leaf.dtype for leaf in jax.tree_util.tree_leaves(batch)} == {np.dtype(np.float32)}
+    assert jj.jmse(jj.Seidel(w020=np.float32(-1.0), w131=np.float32(0.4)), np.float32(0.7),
+                   np.float32(0.25), SIGNAL, NOISE, preset="fast").dtype == np.float32
+    mixed, _ = _host_batch({"a": np.ones(2, np.float32), "b": np.zeros(2), "c": 1.0})
+    assert (mixed["a"].dtype, mixed["b"].dtype, mixed["c"].dtype) == (
+        np.float32, np.float64, np.float64)
+
+
 def test_bad_options_fail_before_compiling():
     with pytest.raises(ValueError, match="preset must be one of"):
         jj.sweep_jmse(jj.Seidel(w020=np.ones(2)), 0.5, 0.2, SIGNAL, NOISE, preset="slow")

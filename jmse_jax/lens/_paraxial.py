@@ -216,6 +216,9 @@ class LensStatus(eqx.Module):
     edge_thickness_ok : bool, every axial gap keeps a non-negative thickness on the axis and
         at the edge (the larger footprint of its two surfaces)
     stop_ok : bool, the chief ray exists (the stop is not at an image of the object)
+    finite : bool, every number of the lens is finite (a concrete lens is checked at
+        construction; this catches NaN or inf reaching a traced one, e.g. from a diverging
+        optimiser)
     power : [1/mm], ``1 / EFL``; max_sine : largest ``|n i / n'|``; min_edge_thickness : [mm],
     the smallest gap thickness, on the axis or at the edge
     """
@@ -227,6 +230,7 @@ class LensStatus(eqx.Module):
     surfaces_reached: jax.Array
     edge_thickness_ok: jax.Array
     stop_ok: jax.Array
+    finite: jax.Array
     power: jax.Array
     max_sine: jax.Array
     min_edge_thickness: jax.Array
@@ -237,7 +241,7 @@ class LensStatus(eqx.Module):
         return (
             self.aperture_ok & self.indices_ok
             & self.positive_power & self.no_total_internal_reflection & self.surfaces_reached
-            & self.edge_thickness_ok & self.stop_ok
+            & self.edge_thickness_ok & self.stop_ok & self.finite
         )
 
 
@@ -273,10 +277,17 @@ def _status(lens: Lens, trace: ParaxialTrace) -> LensStatus:
         surfaces_reached=reached,
         edge_thickness_ok=min_edge >= 0.0,
         stop_ok=trace.stop_gain != 0,
+        finite=_all_finite(lens),
         power=power,
         max_sine=max_sine,
         min_edge_thickness=min_edge,
     )
+
+
+def _all_finite(tree) -> jax.Array:
+    leaves = [jnp.all(jnp.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(tree)
+              if eqx.is_inexact_array(leaf)]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
 
 
 def lens_status(lens: Lens, wavelength=None) -> LensStatus:
@@ -348,6 +359,9 @@ def _raise_for(status: LensStatus, lens: Lens, wavelength=None) -> None:
             f"{float(status.min_edge_thickness)!r} mm (increase the thickness or reduce the "
             f"curvatures)"
         )
+    if not bool(status.finite):
+        raise ValueError(f"every parameter of the lens must be finite, got a NaN or inf in "
+                         f"{lens!r}")
 
 
 def validate_lens(lens: Lens, wavelength=None) -> LensStatus:
