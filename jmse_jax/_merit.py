@@ -952,7 +952,8 @@ def aberration_strength(aberrations: AbstractAberrations, field, u):
     field, u = jnp.asarray(field, dtype), jnp.asarray(u, dtype)
     # Traced input is not checked above: out of range or non-finite gives +inf, as jmse
     # (no stand-in needed: _strength passes no gradient).
-    ok = all_finite((aberrations, field, u)) & (field >= 0) & (field <= 1) & (u > 0)
+    ok = (all_finite((aberrations, field, u)) & (field >= 0) & (field <= 1) & (u > 0)
+          & (u <= U_MAX))
     return jnp.where(ok, _strength(aberrations, field, u), jnp.inf)
 
 

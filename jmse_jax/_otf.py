@@ -75,7 +75,8 @@ def diffraction_limited_otf(r):
     """Aberration-free OTF ``(2/pi)(arccos r - r sqrt(1 - r^2))`` (0 for ``r >= 1``)."""
     r = jnp.abs(r)
     value = (2.0 / math.pi) * (safe_arccos(r) - r * safe_sqrt(1.0 - r * r))
-    return jnp.where(r < 1, value, jnp.zeros_like(value))
+    # NaN stays NaN (r < 1 is false for it).
+    return jnp.where((r < 1) | jnp.isnan(r), value, jnp.zeros_like(value))
 
 
 def _check_aberrations(aberrations, field):

@@ -140,7 +140,9 @@ def zernike_fit(samples, grid: PupilGrid, noll=None) -> Zernike:
                 f"terms up to n={n_max}, |m|={m_max}: need "
                 f"rings >= {math.ceil((n_max + 1) / 2)} and arms > {2 * m_max}"
             )
-    dtype = samples.dtype if jnp.issubdtype(samples.dtype, jnp.floating) else jnp.float32
+    # Integer samples take JAX's default float (float64 when x64 is on), as jnp does.
+    dtype = samples.dtype if jnp.issubdtype(samples.dtype, jnp.floating) else \
+        jnp.result_type(float)
     weighted = samples * jnp.asarray(grid.weights, dtype) / math.pi
     basis = jnp.stack([zernike_polynomial(j, jnp.asarray(grid.x, dtype), jnp.asarray(grid.y, dtype))
                        for j in noll])

@@ -148,7 +148,11 @@ class SweepResult:
             "trees": trees,
             "metadata": self.metadata,
         }
-        text = json.dumps(header, indent=2, default=_json_default)
+        try:  # strict JSON: a non-finite metadata value is refused, not written as NaN
+            text = json.dumps(header, indent=2, default=_json_default, allow_nan=False)
+        except ValueError:
+            raise ValueError("metadata must hold finite numbers only (JSON has no NaN or "
+                             "inf); store such values as strings") from None
         arrays["__header__"] = np.array(text)
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez(path, **arrays)
@@ -165,6 +169,8 @@ class SweepResult:
         ``load`` import or call anything else).
         """
         path = Path(path)
+        if path.suffix == ".json" and path.with_suffix(".npz").exists():
+            path = path.with_suffix(".npz")  # the header's readable copy: read its .npz
         if not path.exists() and path.suffix != ".npz":
             path = path.with_name(path.name + ".npz")
         with np.load(path, allow_pickle=False) as data:
@@ -185,8 +191,8 @@ class SweepResult:
 def _json_default(value):
     if isinstance(value, np.generic):
         return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
+    if isinstance(value, (np.ndarray, jax.Array)):
+        return np.asarray(value).tolist()
     raise TypeError(
         f"metadata value {value!r} of type {type(value).__name__} is not JSON-serialisable"
     )

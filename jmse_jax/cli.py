@@ -71,7 +71,8 @@ class UsageError(ValueError):
 
 def _floats(text: str, name: str) -> list[float]:
     try:
-        values = [float(v) for v in str(text).split(",") if v.strip()]
+        # An empty piece ("1,,5", "1,5,") is an error, not a number to skip.
+        values = [float(v) for v in str(text).split(",")]
     except ValueError:
         raise UsageError(f"{name} must be comma-separated numbers, got {text!r}") from None
     if not values or not all(math.isfinite(v) for v in values):
@@ -269,6 +270,9 @@ def eval_inputs(args) -> dict:
         except json.JSONDecodeError as e:
             raise UsageError(f"--json {args.json} is not valid JSON ({e.msg}, line {e.lineno})"
                              ) from None
+        except UnicodeDecodeError as e:
+            raise UsageError(f"--json {args.json} is not UTF-8 text ({e.reason} at byte "
+                             f"{e.start})") from None
         if not isinstance(data, dict):
             raise UsageError(f"--json {args.json} must hold an object with keys such as w020")
         unknown = sorted(set(data) - set(EVAL_KEYS))
@@ -419,6 +423,16 @@ def _cmd_optimise(args) -> int:
                          signal=signal, noise=noise, f_number=jl.PAPER_SINGLET["f_number"],
                          max_steps=args.max_steps, jmse_options={"preset": args.preset})
     print(result.summary())
+    # The JMSE figures above are jmse's at the start's and the result's Seidel waves: the
+    # warnings jmse gives such designs (e.g. a large --image-shift) are given here too.
+    import jax
+    import numpy as np
+
+    fields = np.asarray(result.fields, float)
+    for lens in (start, result.lens):
+        waves = jl.seidel_waves(lens)
+        warn_like_jmse(jax.tree_util.tree_map(lambda x: np.full(fields.shape, float(x)), waves),
+                       fields, np.full(fields.shape, args.u), signal, noise, args.preset)
     # The lens stores the stop's position on the axis (stop_position = -stop distance); report
     # it as --stop-distance takes it.
     final = dict(stop_distance_mm=-float(result.lens.stop_position),
@@ -529,12 +543,16 @@ def _cmd_sweep(args) -> int:
     cube = jj.hypercube(**axes)
     fixed = {k: getattr(args, k) for k in COEFFICIENTS}
 
-    def numbers(value):  # the whole computation runs in the designs' dtype
+    def numbers(name, value):  # the whole computation runs in the designs' dtype
+        largest, limit = float(np.max(np.abs(value))), float(np.finfo(args.dtype).max)
+        if largest > limit:
+            raise UsageError(f"--{name} reaches {largest:g}, beyond {args.dtype}'s largest "
+                             f"number ({limit:.4g}); use --dtype float64")
         return np.asarray(value, dtype=args.dtype)
 
-    ab = jj.Seidel(**{k: numbers(cube.get(k, fixed[k])) for k in COEFFICIENTS})
-    field = numbers(cube.get("field", args.field))
-    u = numbers(cube.get("u", args.u))
+    ab = jj.Seidel(**{k: numbers(k, cube.get(k, fixed[k])) for k in COEFFICIENTS})
+    field = numbers("field", cube.get("field", args.field))
+    u = numbers("u", cube.get("u", args.u))
     signal = parse_signal(args.signal)
     noise = jj.WhiteNoise(_positive("--noise", args.noise))
     # Under vmap jmse cannot give its warnings for concrete designs: give them here.

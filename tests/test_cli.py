@@ -87,6 +87,8 @@ def test_help_mentions_units(capsys, command, words):
     ("eval", "--noise", "-1"),
     ("eval", "--signal", "gauss:1"),
     ("eval", "--signal", "markov:1"),
+    ("eval", "--signal", "markov:1,,5"),  # an empty piece was skipped: run as markov:1,5
+    ("eval", "--signal", "markov:1,5,"),
     ("eval", "--nu", "0.1,x"),
     ("eval", "--json", "/nonexistent/inputs.json"),
     ("optimise", "--front-curvature", "0.5"),
@@ -96,6 +98,7 @@ def test_help_mentions_units(capsys, command, words):
     ("sweep", "--axis", "w020=0,1,2.5"),
     ("sweep", "--axis", "w020=-1,1,200", "--axis", "w222=-1,1,200"),
     ("sweep", "--workers", "0"),
+    ("sweep", "--w040", "1e39", "--dtype", "float32"),  # was NumPy's overflow warning
     ("sweep", "--batch-size", "0"),
     ("bench", "--builtin", "--repeats", "0"),
     ("eval", "--out-json", "/proc/no/such/folder/x.json"),
@@ -114,6 +117,14 @@ def test_eval_json_with_bad_nu_exits_2_naming_nu(capsys, tmp_path, nu):
     status, _, err = run_cli(capsys, "eval", "--json", str(path))
     assert status == 2 and len(err.strip().splitlines()) == 1
     assert err.startswith("jmse-jax: error: nu must be a number or a list of numbers")
+
+
+def test_eval_json_that_is_not_utf8_exits_2_naming_the_file(capsys, tmp_path):
+    path = tmp_path / "in.json"
+    path.write_bytes(b"\xff\xfe")
+    status, _, err = run_cli(capsys, "eval", "--json", str(path))
+    assert status == 2 and len(err.strip().splitlines()) == 1
+    assert err.startswith(f"jmse-jax: error: --json {path} is not UTF-8 text")
 
 
 def test_eval_json_with_unknown_key_exits_2(capsys, tmp_path):
@@ -357,6 +368,30 @@ def test_optimise_reports_the_stop_distance_as_its_flag_takes_it(capsys, tmp_pat
     assert result["final"]["image_shift_mm"] == pytest.approx(0.01)
     assert result["parameters"]["stop_position"] == pytest.approx(-1.186)
     assert "stop_position" in result["parameters_convention"]
+
+
+def test_optimise_warns_as_jmse_does_for_designs_beyond_the_checked_strength(capsys,
+                                                                           monkeypatch):
+    """A huge --image-shift put millions of waves of defocus into the reported JMSE with no
+    warning (jmse of the same waves warns); the start and the result are checked as eval's
+    design is. Oracle: aberration_strength of the result's waves, which is beyond
+    CHECKED_STRENGTH."""
+    lens = jl.paper_singlet(1.0, 0.05, image_shift=10.0)
+    strength = float(jj.aberration_strength(jl.seidel_waves(lens), 0.0, 0.2))
+    assert strength > jj.CHECKED_STRENGTH
+
+    def fake_optimise(start, variables, **options):
+        return types.SimpleNamespace(
+            summary=lambda: "optimise: (stand-in)", merit="jmse",
+            parameters={"image_shift": 10.0}, value=1e-2, jmse=1e-2, jmse_per_field=[1e-2],
+            fields=[0.0], rms_wavefront=100.0, start_jmse=1e-2, start_rms_wavefront=0.1,
+            lens=lens, iterations=1, wall_time=0.1, result="successful", solver="bfgs")
+
+    monkeypatch.setattr(jj, "optimise", fake_optimise)
+    status, _, err = run_cli(capsys, "optimise")
+    assert status == 0
+    assert err.count("warning: aberration_strength") == 1  # the result, not the start
+    assert f"{strength:.3g}" in err
 
 
 # --------------------------------------------------------------------------------------

@@ -66,6 +66,7 @@ def test_diffraction_limited_formula():
     r = np.concatenate([np.linspace(0.0, 1.0, 21), [1e-9, 0.999999, 1.0 + 1e-12, 1.3]])
     np.testing.assert_allclose(jj.diffraction_limited_otf(jnp.asarray(r)),
                                oracles.diffraction_limited_otf(r), atol=1e-15)
+    assert math.isnan(float(jj.diffraction_limited_otf(jnp.asarray(np.nan))))  # was 0.0
     angle = np.linspace(0.0, 2.0 * np.pi, r.size, endpoint=False)
     h = otf_at(jj.Seidel(), np.stack([r * np.cos(angle), r * np.sin(angle)], axis=1), 0.0)
     np.testing.assert_allclose(h, oracles.diffraction_limited_otf(r), atol=1e-13)
@@ -253,7 +254,7 @@ def test_aberration_strength_of_bad_traced_input_is_inf():
     strength = jax.jit(lambda w, f, u: jj.aberration_strength(jj.Seidel(w020=w), f, u))
     assert float(strength(1.0, 0.0, 0.5)) == pytest.approx(2.0 * math.sqrt(2.0) * 0.5, rel=1e-12)
     for w, f, u in ((jnp.nan, 0.0, 0.5), (1.0, jnp.nan, 0.5), (1.0, 0.0, jnp.inf),
-                    (1.0, 2.0, 0.5), (1.0, 0.0, -1.0), (1.0, 0.0, 0.0)):
+                    (1.0, 2.0, 0.5), (1.0, 0.0, -1.0), (1.0, 0.0, 0.0), (1.0, 0.0, 1.6)):
         assert float(strength(w, f, u)) == math.inf, (w, f, u)
 
 

@@ -79,6 +79,10 @@ def test_zernike_fit_analytic_coefficients():
     expected[10] = w040 / (6 * math.sqrt(5))
     assert fit.noll == tuple(range(1, 16))
     np.testing.assert_allclose(fit.coefficients, expected, atol=1e-14)
+    # Integer samples fit in JAX's default float (float64 here), not float32: piston 1.
+    ones = jj.zernike_fit(np.ones(np.shape(grid.x), int), grid).coefficients
+    assert ones.dtype == jnp.float64
+    np.testing.assert_allclose(ones, np.eye(15)[0], atol=1e-14)
 
 
 @pytest.mark.parametrize("grid", [jj.PolarGrid(3, 10), jj.PolarGrid(6, 40)], ids=repr)

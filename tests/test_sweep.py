@@ -210,6 +210,17 @@ def test_save_and_load_round_trip(tmp_path):
     first = jax.tree_util.tree_map(lambda leaf: leaf[0], loaded.inputs)
     value = jj.jmse(first["aberrations"], first["field"], first["u"], SIGNAL, NOISE, **CHEAP)
     np.testing.assert_allclose(value, loaded.value[0], rtol=1e-12)
+    # The readable header's path loads its .npz (NumPy's message was about pickles).
+    np.testing.assert_array_equal(jj.SweepResult.load(tmp_path / "study.json").value,
+                                  result.value)
+    # JAX scalars in the metadata are written as numbers; NaN (not JSON) is refused.
+    result.metadata["user"] = {"scale": jnp.float32(2.0)}
+    result.save(tmp_path / "scaled")
+    assert json.loads((tmp_path / "scaled.json").read_text())["metadata"]["user"] == {
+        "scale": 2.0}
+    result.metadata["user"] = {"scale": float("nan")}
+    with pytest.raises(ValueError, match="metadata must hold finite numbers only"):
+        result.save(tmp_path / "nan")
 
 
 def test_save_keeps_static_fields(tmp_path):
