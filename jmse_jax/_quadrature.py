@@ -33,7 +33,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import barycentric_matrix, check_choice, check_count, check_range, gauss_legendre
+from ._numerics import (
+    barycentric_matrix,
+    check_choice,
+    check_count,
+    check_range,
+    common_dtype,
+    gauss_legendre,
+)
 
 __all__ = [
     "QUADRATURES",
@@ -403,7 +410,7 @@ def frequency_quadrature(rule: str, u, p, dtype=None):
     """
     check_choice("quadrature", rule, QUADRATURES)
     check_range("u", u, 0.0, None, low_inclusive=False)
-    dtype = dtype or jnp.result_type(float)
+    dtype = dtype or common_dtype(u)  # float32 u: float32 nodes, as jnp would give
     u = jnp.asarray(u, dtype)
     if rule == "polar":
         if isinstance(p, np.ndarray):

@@ -57,6 +57,11 @@ def test_constant_gives_band_area(u):
     p = 10
     assert _rule_integral("rectangle", u, p, one) == pytest.approx(area * (1 - 0.5 / p) ** 2,
                                                                     rel=1e-14)
+    # A float32 u gives float32 nodes and weights (they were float64), summing to the area.
+    for rule, nodes in (("gauss", 3), ("polar", (16, 16))):
+        arrays = frequency_quadrature(rule, np.float32(u), nodes)
+        assert {a.dtype for a in arrays} == {np.dtype(np.float32)}
+        assert float(jnp.sum(arrays[2])) == pytest.approx(area, rel=1e-6)
 
 
 def test_gauss_exact_for_even_polynomials():
