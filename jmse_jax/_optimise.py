@@ -28,7 +28,7 @@ from ._merit import (
     jmse,
     jmse_options as _full_jmse_options,
 )
-from ._numerics import check_choice, check_count, check_range, is_concrete
+from ._numerics import all_finite, check_choice, check_count, check_range, is_concrete
 from ._spectra import AbstractNoise, AbstractSignal, MarkovSignal, WhiteNoise
 from .lens import (
     Lens,
@@ -36,7 +36,7 @@ from .lens import (
     rms_wavefront_error,
     solve_last_curvature,
 )
-from .lens._paraxial import _all_finite, _raise_for, _status
+from .lens._paraxial import _raise_for, _status
 from .lens._seidel import _waves_from_traces
 
 __all__ = ["MERITS", "SOLVERS", "OptimisationResult", "lens_merit", "optimise"]
@@ -235,16 +235,16 @@ def _status_jit(lens, wavelength=None):
 def _check_lens_at(lens, wavelengths):
     """Raise ``ValueError`` when the concrete ``lens`` is non-physical at its reference
     wavelength or at any of ``wavelengths`` (None: the reference only), naming the
-    wavelength."""
-    with jax.ensure_compile_time_eval():
-        _raise_for(_status_jit(lens), lens)
-        if wavelengths is None or not is_concrete(wavelengths):
-            return  # traced wavelengths: the merit says +inf where the lens fails
-        for wl in wavelengths:
-            try:
-                _raise_for(_status_jit(lens, wl), lens, wl)
-            except ValueError as error:
-                raise ValueError(f"at wavelength {float(wl)!r} µm: {error}") from None
+    wavelength. Inside a caller's jit, call it under ``jax.ensure_compile_time_eval()``
+    (as ``lens_merit`` does), or ``_status_jit`` gives tracers."""
+    _raise_for(_status_jit(lens), lens)
+    if wavelengths is None or not is_concrete(wavelengths):
+        return  # traced wavelengths: the merit says +inf where the lens fails
+    for wl in wavelengths:
+        try:
+            _raise_for(_status_jit(lens, wl), lens, wl)
+        except ValueError as error:
+            raise ValueError(f"at wavelength {float(wl)!r} µm: {error}") from None
 
 
 @eqx.filter_jit
@@ -270,7 +270,7 @@ def _merit_table(lens, merit, u, signal, noise, fields, wavelengths, reference_s
     # A NaN or inf in a traced lens (a diverging optimiser): compute with finite stand-ins
     # (flagged by ``ok`` below), which the gradient does not reach, so that the merit is
     # +inf with a zero gradient rather than NaN.
-    finite = _all_finite(lens)
+    finite = all_finite(lens)
     lens = jax.tree_util.tree_map(
         lambda a: jnp.where(finite, a, jax.lax.stop_gradient(
             jnp.where(jnp.isfinite(a), a, jnp.ones_like(a))))

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import check_range, is_concrete
+from .._numerics import all_finite, check_range, is_concrete
 from ._surfaces import Lens, surface_sag
 
 __all__ = [
@@ -277,17 +277,11 @@ def _status(lens: Lens, trace: ParaxialTrace) -> LensStatus:
         surfaces_reached=reached,
         edge_thickness_ok=min_edge >= 0.0,
         stop_ok=trace.stop_gain != 0,
-        finite=_all_finite(lens),
+        finite=all_finite(lens),
         power=power,
         max_sine=max_sine,
         min_edge_thickness=min_edge,
     )
-
-
-def _all_finite(tree) -> jax.Array:
-    leaves = [jnp.all(jnp.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(tree)
-              if eqx.is_inexact_array(leaf)]
-    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
 
 
 def lens_status(lens: Lens, wavelength=None) -> LensStatus:
