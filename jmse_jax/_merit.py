@@ -63,10 +63,12 @@ __all__ = [
     "CHECKED_SLOPE",
     "CHECKED_STRENGTH",
     "DEGREE_OVERLAP",
+    "DEGREE_STEEP_SLOPE",
     "HIGH_BALANCED_GRID",
     "HIGH_DEGREE_NODES",
     "HIGH_RAY_GRID",
     "HIGH_STEEP_GRID",
+    "HIGH_STRONG_STRENGTH",
     "SEQUENTIAL_VMAP_BACKENDS",
     "STEEP_SLOPE",
     "U_MAX",
@@ -345,6 +347,22 @@ HIGH_BALANCED_GRID = dict(nodes=(160, 48), se_nodes=(4800, 960), overlap_nodes=(
 #: (``results/high_steep.md``).
 HIGH_STEEP_GRID = dict(nodes=(128, 64), se_nodes=(6400, 960), overlap_nodes=(80, 80),
                        overlap_floor=80)
+#: ``"high"`` also takes ``HIGH_STEEP_GRID`` for designs stronger than this (the default's
+#: fourth tier starts here). Its own grid (overlap rule (48, 48), 80 radial OTF nodes) is
+#: coarser than the default's fourth tier ((56, 40), 96), and on random Seidel designs of
+#: strength 19-25 at u 1.1-1.2 it was 2.8e-5 and 8.6e-6 off where the default held 2.3e-7
+#: and 1.3e-6; with this grid 9.0e-10 and 3.3e-10 (session 79's audit, ``/tmp`` scripts
+#: recorded in benchmarks/README.md, "Physical invariances and identities").
+HIGH_STRONG_STRENGTH = 15.0
+#: Designs beyond Seidel's shapes (``beyond_seidel_degree``) steeper than this take the
+#: balanced plan (``DEGREE_OVERLAP``) instead of the default's steep tier, whose overlap rule
+#: (64, 64) binds on single terms of high angular order: at u = 0.3 with 0.5 waves of
+#: defocus, ``Z28`` (``m = 6``) at slope 30 was 1.3e-4 off, ``Z14`` 5.0e-5, and ``Z15``
+#: 4.5e-4 at slope 34.7, against 1.4e-6, 1.1e-8 and 1.5e-6 in the balanced plan; at slope
+#: 25 the steep tier held 2.6e-6, 8.0e-8 and 9.0e-6 (session 79). Session 67's random
+#: designs of Noll 4-22 to 4-45, which spread their slope over many terms, had set the
+#: bound at ``STEEP_SLOPE``.
+DEGREE_STEEP_SLOPE = 25.0
 
 #: The counts of the ``"high"`` preset's one-ray plan (``_radial_plans``), over its own grid:
 #: the default's strong one-ray plan (``_RAY_GRIDS``) with ``"high"``'s fine counts. With
@@ -938,8 +956,9 @@ def aberration_strength(aberrations: AbstractAberrations, field, u):
     Returns
     -------
     scalar [waves]; not differentiable (its gradient is zero). Under ``jit`` or ``vmap``
-    (values unchecked) a non-finite input, ``field`` outside [0, 1] or ``u <= 0`` gives
-    ``+inf``, as ``jmse`` does.
+    (values unchecked) a non-finite input, ``field`` outside [0, 1] or ``u`` outside
+    (0, 1.5] gives ``+inf`` (``jmse`` itself computes a traced band past 1.5, which
+    ``lens_merit``'s bands scaled to other wavelengths need).
 
     Examples
     --------
@@ -968,9 +987,9 @@ def _tier_index(strength, u, tiers):
     return jnp.where(_steep(strength, u), len(tiers) - 1, index).astype(jnp.int32)
 
 
-def _steep(strength, u):
-    """Whether a design is steeper than ``STEEP_SLOPE`` (traceable)."""
-    return strength > STEEP_SLOPE * _band_reach(u)
+def _steep(strength, u, slope=STEEP_SLOPE):
+    """Whether a design is steeper than ``slope`` (``STEEP_SLOPE``; traceable)."""
+    return strength > slope * _band_reach(u)
 
 
 def _plain_one_ray_merit(options, dtype, operands):
@@ -1581,12 +1600,13 @@ def jmse(
         cancel each other's slope (defocus set against spherical aberration, say;
         ``BALANCED_CANCELLATION``) takes a balanced tier of its own (``BALANCED_GRID``,
         about 0.2 s a value; ``"high"`` has one too, ``HIGH_BALANCED_GRID``, about
-        0.3 s, and a steep grid past ``STEEP_SLOPE``, ``HIGH_STEEP_GRID``, and finer
-        counts along its one ray, ``HIGH_RAY_GRID``). A design of higher degree than
-        Seidel's (``beyond_seidel_degree``: a Zernike term of radial order 5 or more) takes
-        the steep tier, or if its terms cancel or it is steeper than ``STEEP_SLOPE`` the
-        balanced plan with the overlap rule ``DEGREE_OVERLAP`` (``"high"``: its balanced
-        plan, with that rule and the OTF nodes ``HIGH_DEGREE_NODES``). The two weakest
+        0.3 s, and a steep grid past ``STEEP_SLOPE`` or ``HIGH_STRONG_STRENGTH``,
+        ``HIGH_STEEP_GRID``, and finer counts along its one ray, ``HIGH_RAY_GRID``). A
+        design beyond Seidel's shapes (``beyond_seidel_degree``: a Zernike term of radial
+        order 5 or more, or of angular order 3 or more) takes the steep tier, or if its
+        terms cancel or it is steeper than ``DEGREE_STEEP_SLOPE`` the balanced plan with
+        the overlap rule ``DEGREE_OVERLAP`` (``"high"``: its balanced plan, with that rule
+        and the OTF nodes ``HIGH_DEGREE_NODES``). The two weakest
         tiers first try a cheaper grid and keep its value when a coarse check grid
         (computed in float32) agrees with it to 1e-5 and its own interpolation-error
         estimate is below 1e-5
@@ -1630,7 +1650,7 @@ def jmse(
         ``overlap_floor + (n - overlap_floor) t_max`` per axis (``t_max``: the panel's outer
         end as a fraction of the ray; at most ``n``). 24 in every preset's fixed grid
         (``OVERLAP_FLOOR``); the default's tiers for designs of strength <= 5 and the
-        shortcut's grids use 12.
+        shortcut's check grid use 12, its first grid 10.
     B : int
         Pupil grid of the ``"nudft"``/``"fft"`` engines.
     peaks : bool
@@ -1659,8 +1679,11 @@ def jmse(
     the OTF nearly vanishes on a ring the peaks of ``S_e`` outgrow the grids
     (docs/accuracy.md, "Accuracy at low noise").
     Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
-    under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u``, the spectra's
-    parameters) give ``+inf`` (never NaN) with zero gradient.
+    under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u <= 0``, the
+    spectra's parameters) give ``+inf`` (never NaN) with zero gradient. A traced ``u`` above
+    ``U_MAX`` is computed, not refused: ``lens_merit`` scales the band to other wavelengths
+    and may pass 1.5 (the band beyond the cutoff adds ``S_x`` alone, integrated as for
+    ``u <= 1.5``).
     Works in float32 and float64; the result follows the inputs' dtype.
 
     Outside ``jit`` nothing runs primitive by primitive: a call on concrete inputs
@@ -1816,10 +1839,10 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
     """``(index, tier, cancellation)``: the plan (of ``_base_plans``) this design takes, its
     tier by ``aberration_strength`` alone (``_tier_index``), which picks its one-ray plan,
     and its ``_cancellation`` (all traceable). A design whose terms cancel (``_balancing``)
-    takes the balanced tier. One of higher degree than Seidel's wavefronts
-    (``beyond_seidel_degree``, e.g. a Zernike term of radial order 5 or more) takes, from
+    takes the balanced tier. One beyond Seidel's shapes (``beyond_seidel_degree``, e.g. a
+    Zernike term of radial order 5 or more, or trefoil) takes, from
     ``CANCELLING_STRENGTH``, the default's steep tier if it does not cancel and is no
-    steeper than ``STEEP_SLOPE``, else the balanced tier (``"high"``: its balanced tier),
+    steeper than ``DEGREE_STEEP_SLOPE``, else the balanced tier (``"high"``: its balanced tier),
     whose grid then has the overlap rule ``DEGREE_OVERLAP`` (in ``"high"`` the OTF nodes
     ``HIGH_DEGREE_NODES`` too; ``_base_plans``). The tiers
     were calibrated on Seidel designs only; on random Zernike designs of Noll 4-22 to 4-45
@@ -1847,7 +1870,9 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
     if tiers is not None:
         tier = _tier_index(strength, jax.lax.stop_gradient(u), tiers)
     elif steep is not None:
-        tier = _steep(strength, jax.lax.stop_gradient(u)).astype(jnp.int32)
+        # "high": its steep grid past STEEP_SLOPE or HIGH_STRONG_STRENGTH.
+        tier = (_steep(strength, jax.lax.stop_gradient(u))
+                | (strength > HIGH_STRONG_STRENGTH)).astype(jnp.int32)
     else:
         tier = zero
     if balanced is None:
@@ -1857,8 +1882,9 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
     if _degree_program(aberrations):  # the tiers were calibrated on Seidel's degree
         beyond = (strength >= CANCELLING_STRENGTH) & aberrations.beyond_seidel_degree()
         if tiers is not None:
-            # The default's steep tier up to STEEP_SLOPE, the balanced plan past it.
-            steep_tier = beyond & ~_steep(strength, jax.lax.stop_gradient(u))
+            # The default's steep tier up to DEGREE_STEEP_SLOPE, the balanced plan past it.
+            steep_tier = beyond & ~_steep(strength, jax.lax.stop_gradient(u),
+                                          DEGREE_STEEP_SLOPE)
             index = jnp.where(steep_tier, len(tiers) - 1, index)
             beyond = beyond & ~steep_tier
         balancing = balancing | beyond
@@ -2084,9 +2110,11 @@ def _concrete_merit(static, inputs, warn=False):
 
 
 #: ``baseline_jmse`` warns below this many lags ``1 / B`` per half-band ``u`` (``u * B``):
-#: its rectangle rule then sees fewer than about 10 lags across the band, and at the Fig. 1
-#: point it was measured 38-126 % off for ``u * B`` from 0.6 to 4 (B = 3-20 at u = 0.2),
-#: 8 % at 6.4 (B = 32).
+#: its rectangle rule then sees fewer than about 10 lags across the band. At the Fig. 1
+#: point (u = 0.2) it was -99.8 % to +232 % off for ``u * B`` from 0.2 to 4.8 (B = 1-24),
+#: erratically (a lucky B lands within a few percent: -1.4 % at B = 23); from 5 on it is
+#: still up to tens of percent off, falling about as 1 / B (-34 % at B = 25, 7.5 % at 32,
+#: -8 % at 64; session 79).
 BASELINE_MIN_LAGS = 5.0
 
 
@@ -2098,8 +2126,9 @@ def _warn_coarse_band(u, B):
         warnings.warn(
             f"baseline_jmse: the band |nu_x|, |nu_y| < u = {float(u):.3g} spans only "
             f"u * B = {lags:.3g} lags of 1/B on each side at B = {B}; the square grid's "
-            f"rectangle rule is then off by tens of percent or more (measured 38-126 % at "
-            f"the Fig. 1 point for u * B <= 4). Use B >= {math.ceil(BASELINE_MIN_LAGS / float(u))}",
+            f"rectangle rule is then off by tens of percent or more, erratically in B "
+            f"(measured -99.8 % to +232 % at the Fig. 1 point for u * B < 5). Use "
+            f"B >= {math.ceil(BASELINE_MIN_LAGS / float(u))}",
             UserWarning, stacklevel=3)
 
 
@@ -2115,8 +2144,10 @@ def baseline_jmse(aberrations, field, u, signal, noise, B: int = 64):
 
     Parameters are as in ``jmse``; ``B`` is the pupil grid size (``>= 1``). Bad concrete
     input raises ``ValueError``; under ``jit`` non-finite or out-of-range values give
-    ``+inf``, as in ``jmse``. A concrete ``u`` with ``u * B < BASELINE_MIN_LAGS`` (5) warns:
-    the band then holds too few lags for the rectangle rule.
+    ``+inf``, as in ``jmse``, and so does ``u > U_MAX`` (the lags past the grid are summed out
+    to ``U_MAX`` only; ``jmse`` computes such bands). A concrete ``u`` with
+    ``u * B < BASELINE_MIN_LAGS`` (5) warns: the band then holds too few lags for the
+    rectangle rule.
     """
     check_count("B", B)
     _validate(aberrations, field, u, signal, noise)
@@ -2125,6 +2156,9 @@ def baseline_jmse(aberrations, field, u, signal, noise, B: int = 64):
     # Under jit: +inf for non-finite or out-of-range values, as jmse gives.
     (aberrations, field, u, signal, noise), ok = _sanitise(
         (aberrations, jnp.asarray(field, dtype), jnp.asarray(u, dtype), signal, noise))
+    # _sanitise lets bands past U_MAX through (jmse computes them); this rule's lags past
+    # the grid stop at U_MAX, so a wider band would be summed short.
+    ok = ok & (u <= U_MAX)
     grid_otf = otf_fft_grid(aberrations, field, B, dtype)
     k = jnp.fft.fftfreq(2 * B, 1.0 / (2 * B)).astype(dtype)
     nu_x, nu_y = jnp.meshgrid(k / B, k / B, indexing="xy")

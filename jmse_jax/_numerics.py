@@ -515,7 +515,8 @@ def check_range(
 
 def check_finite_tree(name: str, tree) -> None:
     """Raise ``ValueError`` when any concrete float leaf of ``tree`` is NaN or infinite, and
-    ``TypeError`` when a leaf is not real numbers (a string, say)."""
+    ``TypeError`` when a leaf is not real numbers (a string, a bool: ``w020=True`` would
+    otherwise pass as one wave)."""
     for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
         if not is_concrete(leaf):
             continue
@@ -524,7 +525,7 @@ def check_finite_tree(name: str, tree) -> None:
             arr = np.asarray(leaf)
         except (TypeError, ValueError):
             arr = np.asarray(None)
-        if arr.dtype.kind in "USOc":
+        if arr.dtype.kind in "USOcb":
             raise TypeError(f"{name}{where} must be a real number (or array of them), "
                             f"got {leaf!r}")
         if np.issubdtype(arr.dtype, np.number) and not np.all(np.isfinite(arr)):

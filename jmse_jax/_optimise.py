@@ -496,6 +496,9 @@ class OptimisationResult:
     solver : str; fields : tuple of float
     reference_scale : float [µm], ``lambda N`` of the starting design (after any F-number
         solve), the frequency unit of ``u`` and the spectra for every design of the run
+    jmse_options : dict, the keyword options of ``jmse`` the run used (``{"preset":
+        "fast"}`` unless ``optimise`` was given others): confirm a ``"fast"`` optimum with
+        the default (``lens_merit`` without ``jmse_options``)
     """
 
     solution: object
@@ -515,10 +518,15 @@ class OptimisationResult:
     solver: str
     fields: tuple
     reference_scale: float
+    jmse_options: dict = dataclasses.field(default_factory=dict)
 
     def summary(self) -> str:
         """A readable multi-line report of the optimised design."""
-        lines = [f"optimise: merit={self.merit}, solver={self.solver}, {self.result}"]
+        merit = self.merit
+        if merit == "jmse":
+            options = self.jmse_options or {"preset": "default"}
+            merit += f" ({', '.join(f'{k}={v!r}' for k, v in options.items())})"
+        lines = [f"optimise: merit={merit}, solver={self.solver}, {self.result}"]
         for name, value in self.parameters.items():
             lines.append(f"  {name:<18s} = {value: .8g}")
         for name in ("curvatures", "thicknesses"):
@@ -737,4 +745,5 @@ def optimise(
         wall_time=wall_time, result=result, solver=solver_name,
         fields=tuple(float(f) for f in np.asarray(fields)),
         reference_scale=float(problem.reference_scale),
+        jmse_options=dict(jmse_items),
     )

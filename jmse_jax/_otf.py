@@ -418,20 +418,24 @@ def _otf_fft(aberrations, nu_x, nu_y, field, B):
     return jnp.where(outside, jnp.zeros_like(value), value)
 
 
-#: Overlap nodes per axis that ``otf`` asks for before it warns: ``2 E + 14``, with ``E``
-#: the largest spread (max - min, in waves) of the phase difference ``W(p + nu) - W(p - nu)``
-#: across an overlap lens, over the frequencies asked for (``_phase_spread``). Fitted on 61
-#: designs (single Seidel terms of 5-20 waves and random mixtures of up to 16 waves per
-#: term, |nu| up to 0.3, 0.6 or 1) at 24-96 nodes against (200, 200): every error above
-#: 1e-6 is warned about, and the largest error left unwarned was 2.7e-7.
-_SPREAD_SLOPE, _SPREAD_OFFSET = 2.0, 14.0
+#: Overlap nodes per axis that ``otf`` asks for before it warns: ``1.25 E + 2.5 R + 12``,
+#: with ``E`` the largest spread (max - min, in waves) of the phase difference
+#: ``W(p + nu) - W(p - nu)`` across an overlap lens over the frequencies asked for, and ``R``
+#: that of its residual after the best-fitting plane (``_phase_spread``). A phase
+#: difference linear across the lens (defocus, astigmatism) needs about ``E + 12`` nodes for
+#: 1e-6; a curved one (coma's is quadratic) about ``4.5 R`` (10 waves of coma at field 1:
+#: ``E = R = 8.9``, 40 nodes, where the former rule ``2 E + 14``, fitted on |nu| up to 0.3,
+#: 0.6 or 1, asked for 32 and let a 5.2e-5 error pass; session 79). Fitted on single Seidel
+#: terms of 2-12 waves and random mixtures at |nu| up to 0.999 against (192, 192).
+_SPREAD_LINEAR, _SPREAD_CURVED, _SPREAD_OFFSET = 1.25, 2.5, 12.0
 
 
 @jax.jit
 def _phase_spread(aberrations, field, s_max):
-    """``E``: largest ``max - min`` of ``W(p + s e) - W(p - s e)`` over points ``p`` of the
-    overlap lens, on 12 shifts ``s`` up to ``s_max`` x 12 directions ``e`` x 15 x 15 points
-    (a sampled estimate, for ``otf``'s warning)."""
+    """``(E, R)``: largest ``max - min`` of ``D = W(p + s e) - W(p - s e)`` over points ``p``
+    of the overlap lens, and of ``D`` less its least-squares plane over the same points, on
+    12 shifts ``s`` up to ``s_max`` x 12 directions ``e`` x 15 x 15 points (a sampled
+    estimate, for ``otf``'s warning)."""
     dtype = common_dtype(aberrations, field, s_max)
     s = jnp.minimum(s_max, 0.999) * jnp.asarray(np.arange(1, 13) / 12, dtype)[:, None, None]
     angle = jnp.asarray(np.arange(12) * math.pi / 12, dtype)[None, :, None]
@@ -444,9 +448,21 @@ def _phase_spread(aberrations, field, s_max):
         (px - s * ex) ** 2 + (py - s * ey) ** 2 <= 1)
     diff = (aberrations(px + s * ex, py + s * ey, field)
             - aberrations(px - s * ex, py - s * ey, field))
-    high = jnp.max(jnp.where(inside, diff, -jnp.inf), axis=-1)
-    low = jnp.min(jnp.where(inside, diff, jnp.inf), axis=-1)
-    return jnp.max(jnp.where(high >= low, high - low, 0.0))
+    one = jnp.ones_like(diff)
+    basis = jnp.stack([one, along * one, across * one], -1)
+    weight = inside.astype(dtype)
+    normal = (jnp.einsum("...pi,...pj,...p->...ij", basis, basis, weight)
+              + 1e-12 * jnp.eye(3, dtype=dtype))
+    plane = jnp.linalg.solve(normal, jnp.einsum("...pi,...p,...p->...i", basis, diff,
+                                                weight)[..., None])[..., 0]
+    residual = diff - jnp.einsum("...pi,...i->...p", basis, plane)
+
+    def spread(d):
+        high = jnp.max(jnp.where(inside, d, -jnp.inf), axis=-1)
+        low = jnp.min(jnp.where(inside, d, jnp.inf), axis=-1)
+        return jnp.max(jnp.where(high >= low, high - low, 0.0))
+
+    return spread(diff), spread(residual)
 
 
 def _warn_if_coarse(aberrations, nu_x, nu_y, field, nodes):
@@ -459,9 +475,9 @@ def _warn_if_coarse(aberrations, nu_x, nu_y, field, nodes):
         return
     # Evaluated now even inside a caller's jit (constant inputs there).
     with jax.ensure_compile_time_eval():
-        spread = float(_phase_spread(aberrations, jnp.asarray(field, float),
-                                     min(s_max, 1.0)))
-    need = math.ceil(_SPREAD_SLOPE * spread + _SPREAD_OFFSET)
+        spread, curved = (float(x) for x in _phase_spread(
+            aberrations, jnp.asarray(field, float), min(s_max, 1.0)))
+    need = math.ceil(_SPREAD_LINEAR * spread + _SPREAD_CURVED * curved + _SPREAD_OFFSET)
     if min(nodes) < need:
         warnings.warn(
             f"otf: nodes={tuple(nodes)} may be too few for this design at |nu| up to "
@@ -495,8 +511,8 @@ def otf(
         (``"overlap"``). About ``n >= pi * |2 s grad W|_max + 12`` per axis reaches 1e-10.
         When the inputs are concrete, a ``UserWarning`` says when they look too few for
         1e-6 (``_phase_spread``); with frequencies up to the cutoff the default (32, 32)
-        is quiet up to 4.5 waves of defocus or 10 of coma (cautious: pure defocus holds
-        1e-6 at (32, 32) up to 8 waves).
+        is quiet up to 8 waves of defocus or 6 of coma at full field (cautious: they hold
+        1e-6 at (32, 32) up to 10 and 8 waves).
     B : int
         Square pupil grid size (``"nudft"``, ``"fft"``).
 

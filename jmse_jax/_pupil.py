@@ -106,9 +106,10 @@ def zernike_fit(samples, grid: PupilGrid, noll=None) -> Zernike:
 
     ``c_j = (1/pi) sum_i w_i W_i Z_j(x_i, y_i)``: the quadrature form of the orthogonal
     projection. On a ``PolarGrid`` it is exact for a wavefront that is a combination of the
-    requested polynomials when ``max n <= 2 * rings - 1`` and ``2 * max |m| < arms``; a Seidel
-    wavefront (radial order 4) is therefore recovered exactly from ``rings >= 3, arms >= 5``
-    with ``noll`` covering ``n <= 4`` (``noll = range(1, 16)``).
+    requested polynomials when ``max n <= 2 * rings - 1`` and ``2 * max |m| < arms`` (``max``
+    over the requested ``noll``; fewer arms raise ``ValueError``); a Seidel wavefront (radial
+    order 4) is therefore recovered exactly from ``rings >= 3, arms >= 9`` with ``noll``
+    covering ``n <= 4`` (``noll = range(1, 16)``, whose quadrafoil has ``|m| = 4``).
 
     Parameters
     ----------

@@ -54,6 +54,10 @@ CASES = [
      r"aberrations\.w131 must be a real number, got None"),
     (lambda: jj.otf(jj.Seidel(w222=None), 0.2, 0.0, 0.5), TypeError,
      r"aberrations\.w222 must be a real number, got None"),
+    # A bool passed as one wave (session 79's audit; docs/conventions.md says it raises).
+    (lambda: jj.jmse(jj.Seidel(w020=True), 0.0, 0.2, jj.MarkovSignal(1.0, 5.0),
+                     jj.WhiteNoise(1e-3)), TypeError,
+     r"aberrations\.w020 must be a real number \(or array of them\), got True"),
 ]
 
 

@@ -792,6 +792,66 @@ def test_designs_beyond_seidel_degree_are_accurate_in_the_steep_and_balanced_gri
     assert abs(tier / reference - 1.0) > 3e-3
 
 
+#: Designs beyond Seidel's shapes of session 79's audit, at u = 0.3: defocus with trefoil
+#: (slope 24.7, in the steep tier), with quadrafoil (slope 34.7) and with ``Z28`` (slope 30),
+#: both past ``DEGREE_STEEP_SLOPE`` (the balanced plan).
+TREFOIL = jj.Zernike([0.5, 2.5], noll=(4, 10))
+QUADRAFOIL = jj.Zernike([0.5, 2.5], noll=(4, 15))
+DEFOCUS_Z28 = jj.Zernike([0.5, 1.18], noll=(4, 28))
+#: A random Seidel design of strength 24.6 at field 0.89, u = 1.2, that ``"high"``'s own grid
+#: had 2.8e-5 off (session 79's audit).
+STRONG_SEIDEL = jj.Seidel(w020=4.847, w040=0.8366, w131=-4.2545, w222=-3.6904, w220=5.1349)
+
+
+def test_shapes_beyond_seidel_take_the_steep_tier_or_past_degree_steep_slope_the_balanced():
+    """Trefoil and quadrafoil (angular order 3 and 4, radial order <= 4) were routed by
+    strength alone, as Seidel designs, and were up to 4.5e-3 off without a warning; now they
+    count as beyond Seidel's shapes. A single term of high angular order is harder than
+    session 67's random mixtures: past a slope of ``DEGREE_STEEP_SLOPE`` = 25 the steep
+    tier's overlap rule binds (``Z28`` at slope 30: 1.3e-4 off), so such designs take the
+    balanced plan there (their accuracy: the next test, slow). ``"high"`` takes its steep
+    grid past ``HIGH_STRONG_STRENGTH``."""
+    from jmse_jax import _merit
+
+    steep, balanced = len(jj.DEFAULT_TIERS) - 1, len(jj.DEFAULT_TIERS)
+    index, by_strength, strength, _ = _plan_choice(TREFOIL, 0.3)
+    assert index == steep and by_strength == 2
+    assert 20 * math.sqrt(2) * 0.3 < strength < jj.DEGREE_STEEP_SLOPE * math.sqrt(2) * 0.3
+    for design in (QUADRAFOIL, DEFOCUS_Z28):
+        index, _, strength, _ = _plan_choice(design, 0.3)
+        assert index == balanced
+        assert (jj.DEGREE_STEEP_SLOPE < strength / (math.sqrt(2) * 0.3)
+                < _merit.STEEP_SLOPE)
+    index, _, strength, _ = _plan_choice(STRONG_SEIDEL, 1.2, "high")
+    assert index == 1 and jj.HIGH_STRONG_STRENGTH < strength < jj.CHECKED_STRENGTH
+    assert _plan_choice(jj.Seidel(w020=2.0), 1.2, "high")[0] == 0
+
+
+# Slow: three Zernike programs of the default, one of "high", and their references (about
+# 90 s on the CI machine).
+@pytest.mark.slow
+def test_shapes_beyond_seidel_are_accurate_in_their_routes():
+    """The designs of the test above within 1e-5 of a finer polar grid, where the grids they
+    took before session 79 were 4.3e-3 (trefoil, tier 2), 4.5e-4 (quadrafoil, the steep
+    tier) and 1.3e-4 off (``Z28``, the steep tier); ``"high"`` on the strong Seidel design
+    within 1e-6, where its own grid is 2.8e-5 off."""
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    steep_grid = jj.DEFAULT_TIERS[-1][2]
+    for design, before in ((TREFOIL, jj.DEFAULT_TIERS[2][2]), (QUADRAFOIL, steep_grid),
+                           (DEFOCUS_Z28, steep_grid)):
+        route, reference = _route_and_reference(design, 0.3, signal, noise)
+        assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
+        old = float(jj.jmse(design, 0.5, 0.3, signal, noise, **before))
+        assert abs(old / reference - 1.0) > 1e-4
+    args = (STRONG_SEIDEL, 0.89, 1.2, signal, noise)
+    reference = float(jj.jmse(*args, nodes=(160, 64), se_nodes=(6400, 960),
+                              overlap_nodes=(128, 128), overlap_floor=128, peaks=True))
+    assert float(jj.jmse(*args, preset="high")) == pytest.approx(reference, rel=1e-6)
+    own = float(jj.jmse(*args, preset="high", nodes=(80, 40), se_nodes=(2800, 960),
+                        overlap_nodes=(48, 48)))
+    assert abs(own / reference - 1.0) > 1e-5
+
+
 def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_rule():
     """Defocus with ``Z28`` (``rho^6 cos 6 theta``) at u = 0.3 (slope 46, past
     ``STEEP_SLOPE``; it cancels nothing) takes the balanced plan, which in a program for
@@ -1004,3 +1064,18 @@ def test_traced_band_past_u_max_is_computed(fig1):
     values = [float(_range_value_and_grad(ab, {**point, "u": u})[0]) for u in (1.4, 1.5, 1.6)]
     assert all(math.isfinite(v) for v in values)
     assert values[0] < values[1] < values[2]
+
+
+def test_traced_band_past_u_max_is_inf_in_the_baseline(fig1):
+    """``baseline_jmse`` sums the lags past its grid out to ``U_MAX`` only, so under jit a
+    wider band would be summed short (session 79's audit: u = 1.6 and 2.0 gave the same
+    plausible number); it gives +inf with a zero gradient, while 1.5 still computes."""
+    ab, field, _, signal, noise = fig1
+    value_and_grad = jax.jit(jax.value_and_grad(
+        lambda u: jj.baseline_jmse(ab, field, u, signal, noise, B=16)))
+    for u in (1.6, 2.0):
+        value, grad = value_and_grad(u)
+        assert float(value) == math.inf and float(grad) == 0.0
+    value, _ = value_and_grad(1.5)
+    assert float(value) == pytest.approx(float(jj.baseline_jmse(ab, field, 1.5, signal, noise,
+                                                                 B=16)), rel=1e-12)

@@ -84,6 +84,9 @@ def test_jmse_optimal_design_beats_rms_optimal_design(jmse_optimum, rms_optimum)
     assert float(jl.working_f_number(jmse_optimum.lens)) == pytest.approx(4.6, rel=1e-12)
     summary = jmse_optimum.summary()
     assert "JMSE" in summary and "iterations" in summary
+    # The result names the options it ran (FAST), so a "fast" optimum can be confirmed.
+    assert jmse_optimum.jmse_options == FAST
+    assert "merit=jmse (preset='fast')" in summary
 
 
 def test_different_starts_reach_the_same_jmse(jmse_optimum):

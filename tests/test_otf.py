@@ -271,7 +271,22 @@ def test_too_few_overlap_nodes_warn():
     assert float(jnp.max(jnp.abs(coarse - fine))) > 1e-5  # the warning was warranted
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        enough = jj.otf(coma, nu, 0.2, 1.0, nodes=(48, 48))
+        enough = jj.otf(coma, nu, 0.2, 1.0, nodes=(56, 56))
         jj.otf(jj.Seidel(w131=4.0), nu, 0.2, 1.0)
+        jj.otf(jj.Seidel(w020=8.0), nu, 0.2, 1.0)  # a linear phase difference: 1e-6 held
         jax.jit(lambda c: jj.otf(jj.Seidel(w131=c), nu, 0.2, 1.0))(12.0)  # traced: no check
     assert float(jnp.max(jnp.abs(enough - fine))) < 1e-6
+
+
+def test_coma_warns_where_its_curved_phase_difference_needs_more_nodes():
+    """Coma's phase difference is quadratic across the overlap lens and needs about twice
+    the nodes of a linear one (defocus's) of the same spread: 10 waves of coma at field 1
+    are 5e-5 off at (32, 32) near the cutoff against (160, 160), and ``otf`` warns (the
+    former rule, ``2 E + 14`` with ``E`` the spread alone, asked for 32 and was quiet;
+    session 79's audit)."""
+    coma = jj.Seidel(w131=10.0)
+    nu = jnp.linspace(0.0, 0.999, 120)
+    with pytest.warns(UserWarning, match=r"nodes=\(32, 32\) may be too few"):
+        coarse = jj.otf(coma, 0.0 * nu, nu, 1.0)
+    fine = jj.otf(coma, 0.0 * nu, nu, 1.0, nodes=(160, 160))
+    assert float(jnp.max(jnp.abs(coarse - fine))) > 1e-5
