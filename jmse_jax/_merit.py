@@ -351,15 +351,16 @@ HIGH_STEEP_GRID = dict(nodes=(128, 64), se_nodes=(6400, 960), overlap_nodes=(80,
 #: fourth tier starts here). Its own grid (overlap rule (48, 48), 80 radial OTF nodes) is
 #: coarser than the default's fourth tier ((56, 40), 96), and on random Seidel designs of
 #: strength 19-25 at u 1.1-1.2 it was 2.8e-5 and 8.6e-6 off where the default held 2.3e-7
-#: and 1.3e-6; with this grid 9.0e-10 and 3.3e-10 (session 79's audit, ``/tmp`` scripts
-#: recorded in benchmarks/README.md, "Physical invariances and identities").
+#: and 1.3e-6; with this grid 9.0e-10 and 3.3e-10 (session 79's audit;
+#: ``benchmarks/shape_routes.py``).
 HIGH_STRONG_STRENGTH = 15.0
 #: Designs beyond Seidel's shapes (``beyond_seidel_degree``) steeper than this take the
 #: balanced plan (``DEGREE_OVERLAP``) instead of the default's steep tier, whose overlap rule
 #: (64, 64) binds on single terms of high angular order: at u = 0.3 with 0.5 waves of
 #: defocus, ``Z28`` (``m = 6``) at slope 30 was 1.3e-4 off, ``Z14`` 5.0e-5, and ``Z15``
 #: 4.5e-4 at slope 34.7, against 1.4e-6, 1.1e-8 and 1.5e-6 in the balanced plan; at slope
-#: 25 the steep tier held 2.6e-6, 8.0e-8 and 9.0e-6 (session 79). Session 67's random
+#: 25 the steep tier held 2.6e-6, 8.0e-8 and 9.0e-6 (session 79,
+#: ``benchmarks/shape_routes.py``). Session 67's random
 #: designs of Noll 4-22 to 4-45, which spread their slope over many terms, had set the
 #: bound at ``STEEP_SLOPE``.
 DEGREE_STEEP_SLOPE = 25.0
