@@ -448,8 +448,10 @@ def _phase_spread(aberrations, field, s_max):
         (px - s * ex) ** 2 + (py - s * ey) ** 2 <= 1)
     diff = (aberrations(px + s * ex, py + s * ey, field)
             - aberrations(px - s * ex, py - s * ey, field))
+    # The plane in the lens's scaled coordinates (gu, gv in [-1, 1]: the same planes as in
+    # along, across, and well conditioned in float32 when the lens is thin).
     one = jnp.ones_like(diff)
-    basis = jnp.stack([one, along * one, across * one], -1)
+    basis = jnp.stack([one, gu * one, gv * one], -1)
     weight = inside.astype(dtype)
     normal = (jnp.einsum("...pi,...pj,...p->...ij", basis, basis, weight)
               + 1e-12 * jnp.eye(3, dtype=dtype))
