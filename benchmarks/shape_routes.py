@@ -23,7 +23,7 @@ Every reference is a polar grid with every count past the presets' (nodes (160, 
 se_nodes (6400, 960), overlap (128, 128) floor 128, closed-form peaks); the audit found two
 such grids, this and one a step finer, to agree within 1e-9 on every design here.
 
-Usage (from the repository root; about 12 min on 2 cores)::
+Usage (from the repository root; about 6 min on 2 cores)::
 
     .venv/bin/python benchmarks/shape_routes.py [--quick]
 
