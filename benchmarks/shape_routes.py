@@ -48,7 +48,7 @@ import numpy as np  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
 from jmse_jax._aberrations import noll_to_nm  # noqa: E402
-from jmse_jax._merit import _strength  # noqa: E402
+from jmse_jax._merit import _strength, _tier_index  # noqa: E402
 from jmse_jax._otf import (  # noqa: E402
     _SPREAD_CURVED,
     _SPREAD_LINEAR,
@@ -90,10 +90,10 @@ def shapes(quick):
         reference, _ = _value(design, 0.0, u, **REFERENCE)
         default, warned = _value(design, 0.0, u)
         high, _ = _value(design, 0.0, u, preset="high")
-        # The grid the default took before session 79: its tier by strength.
-        strength = float(_strength(design, jnp.asarray(0.0), jnp.asarray(u)))
-        tier = next(i for i, (s, umax, _, _) in enumerate(jj.DEFAULT_TIERS)
-                    if strength <= s and u <= umax)
+        # The grid the default took before session 79: its tier by strength (and slope).
+        strength = _strength(design, jnp.asarray(0.0), jnp.asarray(u))
+        tier = int(_tier_index(strength, jnp.asarray(u), jj.DEFAULT_TIERS))
+        strength = float(strength)
         before, _ = _value(design, 0.0, u, **jj.DEFAULT_TIERS[tier][2])
         rows.append(dict(noll=noll, coefficients=coefficients, u=u, strength=round(strength, 2),
                          reference=reference, default=_error(default, reference),

@@ -287,10 +287,11 @@ def _outside_seidel(noll: tuple[int, ...]):
     """Positions in ``noll`` of the terms outside Seidel's shapes: radial order ``n > 4``, or
     angular order ``|m| >= 3`` (trefoil, quadrafoil), which no Seidel term has (its terms
     are of angular order 0, 1 and 2)."""
-    return tuple(i for i, j in enumerate(noll)
-                 if noll_to_nm(j)[0] > 4 or abs(noll_to_nm(j)[1]) >= 3)
+    orders = [noll_to_nm(j) for j in noll]
+    return tuple(i for i, (n, m) in enumerate(orders) if n > 4 or abs(m) >= 3)
 
 
+@functools.cache
 def _split_by_order(noll: tuple[int, ...]):
     """Positions in ``noll`` of the terms of Seidel's degree (radial order <= 4) and of the
     higher ones."""

@@ -350,8 +350,8 @@ HIGH_STEEP_GRID = dict(nodes=(128, 64), se_nodes=(6400, 960), overlap_nodes=(80,
 #: ``"high"`` also takes ``HIGH_STEEP_GRID`` for designs stronger than this (the default's
 #: fourth tier starts here). Its own grid (overlap rule (48, 48), 80 radial OTF nodes) is
 #: coarser than the default's fourth tier ((56, 40), 96), and on random Seidel designs of
-#: strength 19-25 at u 1.1-1.2 it was 2.8e-5 and 8.6e-6 off where the default held 2.3e-7
-#: and 1.3e-6; with this grid 9.0e-10 and 3.3e-10 (session 79's audit;
+#: strength 21-25 at u 1.1-1.2 it was 2.8e-5 and 2.9e-6 off where the default held 2.5e-7
+#: and 1.0e-6; with this grid 5.4e-10 and 3.0e-11 (session 79's audit;
 #: ``benchmarks/shape_routes.py``).
 HIGH_STRONG_STRENGTH = 15.0
 #: Designs beyond Seidel's shapes (``beyond_seidel_degree``) steeper than this take the
