@@ -198,12 +198,20 @@ _TIER0_GRID = dict(nodes=(24, 12), se_nodes=(800, 96), overlap_nodes=(20, 20),
 #: calibrate_tiers_kink.md`` (406 designs with u in 0.75-0.95).
 _REACHES_CUTOFF_U = 1.0 / math.sqrt(2.0)
 
-#: The shortcuts' check grid, computed in float32 (``TierShortcut``).
-_CHECK_GRID = dict(nodes=(20, 8), se_nodes=(200, 32), overlap_nodes=(16, 16),
+#: The shortcuts' check grid, computed in float32 (``TierShortcut``). Its angular OTF count
+#: (10) differs from the first grid's (8), so that it sees the first grid's angular
+#: interpolation error independently of that grid's own estimate: with 8 angular nodes in
+#: both, designs of tier 1 near astigmatism w222 = 1.6 at field 1 kept a first grid 1.2e-5
+#: to 1.7e-5 off whose estimate read 6.8e-6 to 1e-5 (the estimate drops one Legendre degree
+#: and under-reads a slowly decaying series up to 2.6-fold there), and the check agreed to
+#: 2e-6. With 10 the check refuses them (1.1e-5 to 1.2e-5 apart) and keeps the same
+#: calibration designs as before (``benchmarks/shortcut_margin.py``, session 80); it costs
+#: about 6 % of the Fig. 1 point's value time.
+_CHECK_GRID = dict(nodes=(20, 10), se_nodes=(200, 32), overlap_nodes=(16, 16),
                    overlap_floor=_WEAK_FLOOR)
 #: The shortcuts' first grid and its error-estimate tolerance (``TierShortcut.first``): it
-#: differs from the check in every count but the angular one (whose error the estimate
-#: covers), and costs about 40 % of tier 0's grid. On the stored calibration designs and
+#: differs from the check in every count (the angular one since session 80), and costs
+#: about 40 % of tier 0's grid. On the stored calibration designs and
 #: bank cases that the shortcuts serve it was kept for 71 of 79 designs of tier 0 (worst
 #: error 1.0e-6) and 108 of 214 of tier 1 (worst 1.8e-6); the check alone would have kept
 #: 116 of the latter, one of them 1.6e-4 off (``benchmarks/recheck_shortcut.py``). Tier 0's

@@ -807,7 +807,8 @@ def _enable_compile_cache(jax) -> None:
     gradient take about 12 s to compile on a 2-core CPU and about 1 s to read back (the ~5 s
     of tracing before it are not cached). A cache
     location the user set (``JAX_COMPILATION_CACHE_DIR``) is used as it is; an unwritable
-    location turns the cache off with a one-line note."""
+    location turns the cache off with a one-line note. Programs that compile in under 1 s
+    are not kept, unless ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` says otherwise."""
     if jax.config.jax_compilation_cache_dir:
         return
     path = compile_cache_dir()
@@ -817,7 +818,8 @@ def _enable_compile_cache(jax) -> None:
         print(f"jmse-jax: note: compilation cache off ({path}: {e.strerror})", file=sys.stderr)
         return
     jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+    if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 
 def main(argv=None) -> int:

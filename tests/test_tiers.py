@@ -45,6 +45,11 @@ FIRST_KEPT = (jj.Seidel(w020=1.52, w040=0.23, w131=-1.02, w222=1.73, w220=-1.18)
 # trace of astigmatism keeps it off the one-ray path of rotationally symmetric designs
 # (tests/test_radial.py), so that it runs the polar grids of the tier.
 DEFOCUS_M6 = (jj.Seidel(w020=-6.0, w222=0.02), 1.0, 0.2, 1)
+# A middle-tier design (strength 3.6, u = 0.6) whose OTF varies across angle more than 8
+# angular nodes resolve: the shortcut's first grid is 1.15e-5 off while its estimate reads
+# 1.0e-5 (within ``first_tol``), and a check grid with the same 8 angular nodes agreed with it
+# to 2e-6; the check's 10 angular nodes (since session 80) see the error and refuse it.
+ANGULAR_MISSED = (jj.Seidel(w020=-0.4, w131=0.5, w222=1.5611), 1.0, 0.6, 1)
 # Astigmatism at the medial focus (w020 = -w222 h^2 / 2): cancellation 3, strength 2.8 (by
 # strength alone tier 1 of SMALL_TIERS), so it takes the balanced tier.
 MEDIAL_FOCUS = (jj.Seidel(w020=-5.0, w222=10.0), 1.0, 0.2, 1)
@@ -128,6 +133,7 @@ def _fixed32(ab, field, u, grid):
 @pytest.mark.parametrize("ab, field, u, tier, path", [
     (*DESIGNS[0], "first"), (*DESIGNS[1], "first"), (*FIRST_KEPT, "first"),
     (*DEFOCUS_M6, "grid"), (*DESIGNS[2], "grid"), (*STRONG, "grid"), (*DESIGNS[3], "grid"),
+    (*ANGULAR_MISSED, "grid"),
 ])
 def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
     """Eager, jit and value_and_grad all run the tier the strength selects,
@@ -168,6 +174,23 @@ def test_default_equals_the_grid_its_tier_selects(ab, field, u, tier, path):
                                    rtol=1e-10, atol=1e-16)
 
 
+def test_shortcut_check_sees_the_first_grids_angular_error():
+    """At ``ANGULAR_MISSED`` the first grid's error is angular (its 8 angular OTF nodes; the
+    oracle is the same grid with 32) and more than 1e-5, its own estimate stays within
+    ``first_tol``, so only a check that does not share its angular nodes refuses it; the
+    default then returns its tier's own grid, within 1e-6 of the oracle."""
+    ab, field, u, _ = ANGULAR_MISSED
+    shortcut = jj.DEFAULT_TIERS[1][3]
+    first_grid = shortcut.first
+    oracle = _fixed(ab, field, u, {**first_grid, "nodes": (first_grid["nodes"][0], 32)})
+    first = _fixed(ab, field, u, first_grid)
+    assert abs(first / oracle - 1.0) > 1.1e-5
+    assert _first_estimate(ab, field, u, first_grid) <= shortcut.first_tol
+    assert shortcut.check["nodes"][1] != first_grid["nodes"][1]
+    assert _route(ab, field, u, SIGNAL, NOISE)["path"] == "grid"
+    assert float(jj.jmse(ab, field, u, SIGNAL, NOISE)) == pytest.approx(oracle, rel=1e-6)
+
+
 # Slow: forward mode through the default's whole tier switch is a program of its own (about
 # 40 s to compile on the CI machine). Reverse mode, checked above on the same designs, runs
 # the same derivative rule (JAX linearises the rule and transposes its linear part).
@@ -189,8 +212,10 @@ def test_forward_mode_of_the_default_equals_reverse_mode(ab, field, u, tier):
 ])
 def test_shortcut_check_runs_in_float32(ab, field, u):
     """The shortcut's check is computed in float32 whatever the merit's dtype and returned
-    in that dtype: bit for bit the float32 computation, and within 1e-6 of the float64 one
-    (far inside the acceptance tolerance, 1e-5). The check grid has no closed-form peaks
+    in that dtype: bit for bit the float32 computation, and within 2e-6 of the float64 one
+    (inside the acceptance tolerance, 1e-5; 1.2e-6 at the Fig. 1 point with the check's 10
+    angular nodes; on the calibration designs the shortcuts serve, float32 changed no
+    decision, ``benchmarks/recheck_shortcut.py``). The check grid has no closed-form peaks
     (``_tier_plans``), so neither do its restatements here."""
     from jmse_jax._merit import _check_value, _compiled_check, _Static, _tier_plans
 
@@ -203,7 +228,7 @@ def test_shortcut_check_runs_in_float32(ab, field, u):
     # The eager path's check (tilt removed inside) is the traced path's, bit for bit.
     assert float(_compiled_check(_Static(options), float64, (ab, *operands[1:]))) == float(value)
     assert float(value) == _fixed32(ab, field, u, check)
-    assert float(value) == pytest.approx(_fixed(ab, field, u, check), rel=1e-6)
+    assert float(value) == pytest.approx(_fixed(ab, field, u, check), rel=2e-6)
 
 
 def _lowered_independently(coarse_nodes, fine_nodes, drop):
