@@ -200,13 +200,15 @@ _REACHES_CUTOFF_U = 1.0 / math.sqrt(2.0)
 
 #: The shortcuts' check grid, computed in float32 (``TierShortcut``). Its angular OTF count
 #: (10) differs from the first grid's (8), so that it sees the first grid's angular
-#: interpolation error independently of that grid's own estimate: with 8 angular nodes in
-#: both, designs of tier 1 near astigmatism w222 = 1.6 at field 1 kept a first grid 1.2e-5
-#: to 1.7e-5 off whose estimate read 6.8e-6 to 1e-5 (the estimate drops one Legendre degree
-#: and under-reads a slowly decaying series up to 2.6-fold there), and the check agreed to
-#: 2e-6. With 10 the check refuses them (1.1e-5 to 1.2e-5 apart) and keeps the same
-#: calibration designs as before (``benchmarks/shortcut_margin.py``, session 80); it costs
-#: about 6 % of the Fig. 1 point's value time.
+#: interpolation error independently of that grid's own estimate (which drops one Legendre
+#: degree, and under-reads a slowly decaying series). With 8 angular nodes in both, a hill
+#: climb over tier-1 designs found kept first grids up to 4.5e-5 off (estimate 2.9e-6, check
+#: agreement 2e-7; u = 0.70, field 0.26), and 1.15e-5 near w222 = 1.6 at field 1;
+#: with 10 the check refuses all of them, the same climb finds 1.15e-5 at worst (the check's
+#: own rtol); the calibration designs keep the same first grids and 1000 random weak
+#: designs one more (779 of 920; ``benchmarks/shortcut_margin.py``,
+#: ``benchmarks/recheck_shortcut.py``, session 80). It costs about 6 % of the Fig. 1
+#: point's value time.
 _CHECK_GRID = dict(nodes=(20, 10), se_nodes=(200, 32), overlap_nodes=(16, 16),
                    overlap_floor=_WEAK_FLOOR)
 #: The shortcuts' first grid and its error-estimate tolerance (``TierShortcut.first``): it
@@ -1617,8 +1619,8 @@ def jmse(
         the overlap rule ``DEGREE_OVERLAP`` (``"high"``: its balanced plan, with that rule
         and the OTF nodes ``HIGH_DEGREE_NODES``). The two weakest
         tiers first try a cheaper grid and keep its value when a coarse check grid
-        (computed in float32) agrees with it to 1e-5 and its own interpolation-error
-        estimate is below 1e-5
+        (computed in float32, on other angular nodes) agrees with it to 1e-5 and its own
+        interpolation-error estimate is below 1e-5
         (``TierShortcut``; only for ``u <= 1/sqrt(2)``, where no ray of the band reaches
         the cutoff): about half of the middle tier's designs and nine in ten of the first's,
         the paper's Fig. 1 point among them, then cost that grid, its estimate and the check

@@ -1,0 +1,153 @@
+"""Adversarial accuracy of the default preset: a hill climb on its relative error.
+
+The default's tiers were calibrated on random designs (``calibrate_tiers.py``), which say
+little about the worst design in a region. This script draws random Seidel designs over the
+checked range (where a concrete ``jmse`` call gives no ``UserWarning``: strength, slope,
+cancellation and peak SNR within the bounds the preset was checked at), keeps the
+``--starts`` worst by the default's error against a converged polar grid, and from each runs
+``--steps`` steps of a random hill climb on that error (coefficients moved by 10 % of the
+start's scale plus 0.05 waves, field by 0.1, u by 0.05 within 0.05-1.2, correlation length
+and noise by factors of e^0.3 and e^0.5; a step that leaves the checked range is dropped).
+The worst design of each climb is re-checked against a finer reference, so that a large
+error cannot be the reference's.
+
+Usage (from the repository root; about 25 min on 2 cores with the defaults)::
+
+    .venv/bin/python benchmarks/default_climb.py [--designs 150] [--starts 6] [--steps 30]
+        [--preset default] [--seed 0]
+
+Writes ``results/default_climb.json`` and ``.md`` (``--preset high``: ``default_climb_high``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import _common as common  # noqa: E402 - turns on float64
+import numpy as np  # noqa: E402
+
+import jmse_jax as jj  # noqa: E402
+from jmse_jax._merit import _route  # noqa: E402
+
+TERMS = ("w020", "w040", "w131", "w222", "w220")
+#: Every count past the presets' (as ``shape_routes.py``).
+REFERENCE = dict(nodes=(160, 64), se_nodes=(6400, 960), overlap_nodes=(128, 128),
+                 overlap_floor=128, peaks=True)
+#: A step finer in every count, for the worst designs.
+FINER = dict(nodes=(200, 80), se_nodes=(8000, 1200), overlap_nodes=(160, 160),
+             overlap_floor=160, peaks=True)
+
+
+def _design(row):
+    return (jj.Seidel(**row["coefficients"]), row["field"], row["u"],
+            jj.MarkovSignal(1.0, row["correlation_length"]), jj.WhiteNoise(row["noise"]))
+
+
+def _evaluate(row, preset):
+    """``row`` with the preset's value, route and error against ``REFERENCE``, or None when
+    a concrete call warns (the design is outside the checked range)."""
+    design = _design(row)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            value = float(jj.jmse(*design, preset=preset))
+        except UserWarning:
+            return None
+    route = _route(*design, preset=preset) if preset == "default" else {}
+    reference = float(jj.jmse(*design, **REFERENCE))
+    return dict(row, value=value, reference=reference, error=abs(value / reference - 1.0),
+                strength=float(jj.aberration_strength(*design[:3])),
+                tier=route.get("tier"), path=route.get("path"),
+                balanced=route.get("balanced"), one_ray=route.get("one_ray"))
+
+
+def _random_row(rng):
+    scale = float(rng.choice([0.5, 1.0, 2.0, 4.0, 8.0]))
+    return dict(scale=scale,
+                coefficients={k: float(rng.uniform(-scale, scale)) for k in TERMS},
+                field=float(rng.uniform(0, 1)), u=float(rng.choice([0.1, 0.2, 0.3, 0.5, 0.7,
+                                                                     0.85, 1.0])),
+                correlation_length=float(rng.uniform(2, 10)),
+                noise=float(10 ** rng.uniform(-5, -2)))
+
+
+def _step(row, rng):
+    size = 0.1 * row["scale"] + 0.05
+    return dict(scale=row["scale"],
+                coefficients={k: v + float(rng.normal(0, size))
+                              for k, v in row["coefficients"].items()},
+                field=float(np.clip(row["field"] + rng.normal(0, 0.1), 0, 1)),
+                u=float(np.clip(row["u"] + rng.normal(0, 0.05), 0.05, 1.2)),
+                correlation_length=float(np.clip(
+                    row["correlation_length"] * np.exp(rng.normal(0, 0.3)), 1, 20)),
+                noise=float(np.clip(row["noise"] * np.exp(rng.normal(0, 0.5)), 1e-6, 1e-2)))
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--designs", type=int, default=150)
+    parser.add_argument("--starts", type=int, default=6)
+    parser.add_argument("--steps", type=int, default=30)
+    parser.add_argument("--preset", default="default")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    rng = np.random.default_rng(args.seed)
+    start = time.perf_counter()
+    sample = []
+    for i in range(args.designs):
+        row = _evaluate(_random_row(rng), args.preset)
+        if row is not None:
+            sample.append(dict(row, design=i))
+    print(f"{len(sample)} of {args.designs} random designs in the checked range; worst "
+          f"{max(r['error'] for r in sample):.2e} [{time.perf_counter() - start:.0f} s]",
+          flush=True)
+    climbs = []
+    for row in sorted(sample, key=lambda r: -r["error"])[:args.starts]:
+        best, improved = row, 0
+        for _ in range(args.steps):
+            candidate = _evaluate(_step(best, rng), args.preset)
+            if candidate is not None and candidate["error"] > best["error"]:
+                best, improved = candidate, improved + 1
+        finer = float(jj.jmse(*_design(best), **FINER))
+        best = dict(best, finer=finer, reference_change=abs(best["reference"] / finer - 1.0),
+                    error_finer=abs(best["value"] / finer - 1.0))
+        climbs.append(dict(start=row, worst=best, improved=improved))
+        print(f"climb from design {row['design']} ({row['error']:.2e}): {best['error']:.2e} "
+              f"after {improved} improvements, tier {best['tier']} path {best['path']}, "
+              f"reference moves {best['reference_change']:.1e} on the finer grid "
+              f"[{time.perf_counter() - start:.0f} s]", flush=True)
+    errors = np.array([r["error"] for r in sample])
+    lines = [f"# Adversarial accuracy of `preset={args.preset!r}`", "",
+             f"`python benchmarks/default_climb.py --designs {args.designs} --starts "
+             f"{args.starts} --steps {args.steps} --preset {args.preset} --seed {args.seed}`",
+             "", common.machine_line(common.machine_info(), common.load_average()), "",
+             f"Random sample: {len(sample)} of {args.designs} designs in the checked range; "
+             f"error median {np.median(errors):.1e}, worst {errors.max():.2e}. Reference "
+             f"{REFERENCE}; the climbs' worst designs re-checked on {FINER}.", "",
+             "| start | its error | worst found | on the finer reference | reference change | "
+             "strength | tier | path | design |", "|---|---|---|---|---|---|---|---|---|"]
+    for c in climbs:
+        w = c["worst"]
+        lines.append(
+            f"| {c['start']['design']} | {c['start']['error']:.2e} | {w['error']:.2e} | "
+            f"{w['error_finer']:.2e} | {w['reference_change']:.1e} | {w['strength']:.2f} | "
+            f"{w['tier']} | {w['path']} | "
+            f"{ {k: round(v, 4) for k, v in w['coefficients'].items()} }, field "
+            f"{w['field']:.3f}, u {w['u']:.3f}, correlation length "
+            f"{w['correlation_length']:.3f}, noise {w['noise']:.3g} |")
+    print("\n".join(lines))
+    name = "default_climb" if args.preset == "default" else f"default_climb_{args.preset}"
+    common.write_report(name, dict(machine=common.machine_info(), preset=args.preset,
+                                   reference=REFERENCE, finer=FINER, sample=sample,
+                                   climbs=climbs), lines)
+
+
+if __name__ == "__main__":
+    main()
