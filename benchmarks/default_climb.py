@@ -37,9 +37,7 @@ import jmse_jax as jj  # noqa: E402
 from jmse_jax._merit import _route  # noqa: E402
 
 TERMS = ("w020", "w040", "w131", "w222", "w220")
-#: Every count past the presets' (as ``shape_routes.py``).
-REFERENCE = dict(nodes=(160, 64), se_nodes=(6400, 960), overlap_nodes=(128, 128),
-                 overlap_floor=128, peaks=True)
+REFERENCE = common.CONVERGED_POLAR
 #: A step finer in every count, for the worst designs.
 FINER = dict(nodes=(200, 80), se_nodes=(8000, 1200), overlap_nodes=(160, 160),
              overlap_floor=160, peaks=True)

@@ -56,8 +56,7 @@ from jmse_jax._otf import (  # noqa: E402
     _phase_spread,
 )
 
-REFERENCE = dict(nodes=(160, 64), se_nodes=(6400, 960), overlap_nodes=(128, 128),
-                 overlap_floor=128, peaks=True)
+REFERENCE = common.CONVERGED_POLAR
 STEEP = jj.DEFAULT_TIERS[-1][2]
 BALANCED = {**jj.BALANCED_GRID, **jj.DEGREE_OVERLAP}
 HIGH_OWN = dict(nodes=(80, 40), se_nodes=(2800, 960), overlap_nodes=(48, 48))

@@ -49,9 +49,7 @@ from jmse_jax._merit import (  # noqa: E402
     _tier_plans,
 )
 
-#: Every count past the presets' (as ``shape_routes.py``; two such grids agreed to 1e-9).
-REFERENCE = dict(nodes=(160, 64), se_nodes=(6400, 960), overlap_nodes=(128, 128),
-                 overlap_floor=128, peaks=True)
+REFERENCE = common.CONVERGED_POLAR
 #: The continuity audit's design, at the threshold (session 79).
 TERMS = ("w020", "w040", "w131", "w222", "w220")
 AUDIT = dict(w020=-0.4, w131=0.5, w222=1.56114355602806 * (1 - 1e-9))
