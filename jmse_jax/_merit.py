@@ -142,6 +142,25 @@ CHECKED_SNR = 2e6
 #: 3e-9 (``"high"``) up to 1.6e9; gradients within 5e-5 and 4e-7 at 1.6e7, 7e-4 and 3e-6 at
 #: 1.6e8: near the axis at high SNR take ``"high"``).
 CHECKED_SNR_PEAKS = 2e8
+#: Largest ``S_x / S_n`` on the innermost ring where the OTF can vanish (``_ring_snr``) at
+#: which the default's two weakest tiers are used: a design above the first bound skips
+#: tier 0, above the second tier 1 too (``_tier_index``). Their grids have no closed-form
+#: peaks and 800 and 2400 fine radial nodes, and near the axis, where the OTF nearly
+#: vanishes on rings inside the band, the ridges of ``S_e`` there (width
+#: ``~ sqrt(S_n / S_x)``) outgrow them well inside ``CHECKED_SNR`` when the signal spectrum
+#: is flat enough that the SNR on the ring is near the peak's: session 80's adversarial
+#: climb (``benchmarks/default_climb.py``) found tier 0 1.3e-2 off at a peak SNR of 1.9e6
+#: (2.5 waves of defocus, field 0.07, u = 0.1, correlation length 1.35; ring SNR 1.6e6) and
+#: tier 1 1.4e-4 there. Scanning the noise on that design, tier 0 holds 1.2e-7 up to a ring
+#: SNR of 2.6e4 (7.7e-6 at 8.7e4) and tier 1 1.1e-8 up to 2.6e5 (1.3e-5 at 8.7e5); tier 2
+#: (4800 fine radial nodes) 2.1e-8 at 1.6e6. The paper's Fig. 1 point (ring SNR 9.9e4)
+#: keeps tier 1, and so does the same design at noise 1e-4 (9.9e5).
+WEAK_TIER_SNR = (3e4, 1e6)
+#: ``_ring_snr``'s innermost ring, as a multiple of ``u / aberration_strength``: the OTF's
+#: first zero where the phase difference across the overlap lens reaches about half a wave,
+#: ``nu ~ 1 / (4 max |grad W|)``, with the strength ``max |grad W| sqrt(2) u``: about
+#: ``0.35 u / strength``, taken a little inside.
+_RING_FRACTION = 0.3
 
 
 class TierShortcut(NamedTuple):
@@ -987,15 +1006,37 @@ def aberration_strength(aberrations: AbstractAberrations, field, u):
     return jnp.where(ok, _strength(aberrations, field, u), jnp.inf)
 
 
-def _tier_index(strength, u, tiers):
+def _ring_snr(strength, u, signal, noise):
+    """``S_x / S_n`` at the innermost ring where the OTF of a design of this strength can
+    vanish, ``_RING_FRACTION u / strength`` from the origin (at most the band's corner,
+    ``sqrt(2) u``), along the ``nu_x`` axis (the package's spectra are isotropic);
+    traceable."""
+    nu = jnp.minimum(_RING_FRACTION * u / jnp.maximum(strength, 1e-30), jnp.sqrt(2.0) * u)
+    zero = jnp.zeros_like(nu)
+    return signal(nu, zero) / noise(nu, zero)
+
+
+def _tier_index(strength, u, tiers, snr=None):
     """Index of the first tier whose bounds hold (traceable; the last tier has none); a
-    design steeper than ``STEEP_SLOPE`` takes the last tier."""
+    design steeper than ``STEEP_SLOPE`` takes the last tier. With the ring SNR ``snr``
+    (``_ring_snr``) and the default's tiers, a tier ``i`` of ``WEAK_TIER_SNR``'s is skipped
+    above its bound there (``_snr_bounds``)."""
+    snr_bounds = () if snr is None else _snr_bounds(tiers)
     index = jnp.zeros((), jnp.int32)
     past = jnp.asarray(True)
-    for bound, u_bound, *_ in tiers[:-1]:
-        past = past & ((strength > bound) | (u > u_bound))
+    for i, (bound, u_bound, *_) in enumerate(tiers[:-1]):
+        skip = (strength > bound) | (u > u_bound)
+        if i < len(snr_bounds):
+            skip = skip | (snr > snr_bounds[i])
+        past = past & skip
         index = index + past.astype(jnp.int32)
     return jnp.where(_steep(strength, u), len(tiers) - 1, index).astype(jnp.int32)
+
+
+def _snr_bounds(tiers):
+    """``WEAK_TIER_SNR`` for the default's tiers (calibrated on their grids), else none: a
+    caller's own tiers are chosen by strength and ``u`` alone."""
+    return WEAK_TIER_SNR if tiers == DEFAULT_TIERS else ()
 
 
 def _steep(strength, u, slope=STEEP_SLOPE):
@@ -1846,12 +1887,14 @@ def _tier_plans_of(static, plans):
     return plans[:1 if tiers is None else len(tiers)]
 
 
-def _tier_of(static, aberrations, field, u, cancelling=False):
+def _tier_of(static, aberrations, field, u, signal=None, noise=None, cancelling=False):
     """``(index, tier, cancellation)``: the plan (of ``_base_plans``) this design takes, its
     tier by ``aberration_strength`` alone (``_tier_index``), which picks its one-ray plan,
-    and its ``_cancellation`` (all traceable). A design whose terms cancel (``_balancing``)
-    takes the balanced tier. One beyond Seidel's shapes (``beyond_seidel_degree``, e.g. a
-    Zernike term of radial order 5 or more, or trefoil) takes, from
+    and its ``_cancellation`` (all traceable). With the spectra, the default's weak tiers
+    are skipped above ``WEAK_TIER_SNR`` (for the plan, not the one-ray plan's choice). A
+    design whose terms cancel (``_balancing``) takes the balanced tier. One beyond Seidel's
+    shapes (``beyond_seidel_degree``, e.g. a Zernike term of radial order 5 or more, or
+    trefoil) takes, from
     ``CANCELLING_STRENGTH``, the default's steep tier if it does not cancel and is no
     steeper than ``DEGREE_STEEP_SLOPE``, else the balanced tier (``"high"``: its balanced tier),
     whose grid then has the overlap rule ``DEGREE_OVERLAP`` (in ``"high"`` the OTF nodes
@@ -1878,16 +1921,24 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
             lambda *_: cancellation, aberrations, field, u)
     # Without tiers (``"high"``) the one fixed grid is plan 0, the steep grid plan 1 (taken,
     # as the default's steep tier, past ``STEEP_SLOPE``) and the balanced grid the last.
+    by_strength = None
     if tiers is not None:
-        tier = _tier_index(strength, jax.lax.stop_gradient(u), tiers)
+        u_ = jax.lax.stop_gradient(u)
+        by_strength = _tier_index(strength, u_, tiers)
+        tier = by_strength
+        if signal is not None and _snr_bounds(tiers):
+            snr = jax.lax.stop_gradient(_ring_snr(strength, u_, signal, noise))
+            tier = _tier_index(strength, u_, tiers, snr.astype(strength.dtype))
     elif steep is not None:
         # "high": its steep grid past STEEP_SLOPE or HIGH_STRONG_STRENGTH.
         tier = (_steep(strength, jax.lax.stop_gradient(u))
                 | (strength > HIGH_STRONG_STRENGTH)).astype(jnp.int32)
     else:
         tier = zero
+    if by_strength is None:
+        by_strength = tier
     if balanced is None:
-        return tier, tier, cancellation
+        return tier, by_strength, cancellation
     balancing = _balancing(strength, cancellation)
     index = tier
     if _degree_program(aberrations):  # the tiers were calibrated on Seidel's degree
@@ -1900,7 +1951,7 @@ def _tier_of(static, aberrations, field, u, cancelling=False):
             beyond = beyond & ~steep_tier
         balancing = balancing | beyond
     index = jnp.where(balancing, _n_strength_plans(static), index)
-    return index.astype(jnp.int32), tier, cancellation
+    return index.astype(jnp.int32), by_strength, cancellation
 
 
 def _n_strength_plans(static):
@@ -1916,7 +1967,7 @@ def _balancing(strength, cancellation):
     return (strength >= CANCELLING_STRENGTH) & (cancellation >= BALANCED_CANCELLATION)
 
 
-def _plans_and_index(static, aberrations, field, u):
+def _plans_and_index(static, aberrations, field, u, signal=None, noise=None):
     """All plans of ``static``, the index of the one this design takes, its tier (the index
     among the plans before the one-ray ones) and the number of those plans when the choice
     of a one-ray plan depends on the values (else None), all traceable.
@@ -1928,7 +1979,7 @@ def _plans_and_index(static, aberrations, field, u):
     the gradient from the design's own tier (``_switched_merit_jvp``).
     """
     plans = _base_plans(static, aberrations)
-    index, by_strength, _ = _tier_of(static, aberrations, field, u)
+    index, by_strength, _ = _tier_of(static, aberrations, field, u, signal, noise)
     tier = index
     # A rotationally symmetric design (any design on the axis) is integrated along one ray:
     # more plans in the same switch (``_radial_plans``).
@@ -1962,7 +2013,8 @@ def _traced_merit(static, inputs):
     # |H| does not depend on tilt; removing it smooths H over the band (fewer OTF nodes).
     aberrations = aberrations.without_tilt()
     operands = (aberrations, field, u, signal, noise)
-    plans, index, tier, n_base = _plans_and_index(static, aberrations, field, u)
+    plans, index, tier, n_base = _plans_and_index(static, aberrations, field, u, signal,
+                                                  noise)
     if len(plans) == 1 and plans[0][1] is None:
         value = _merit_value(plans[0][0], dtype, *operands)
     else:
@@ -1971,13 +2023,14 @@ def _traced_merit(static, inputs):
 
 
 @functools.partial(jax.jit, static_argnums=0)
-def _concrete_choice(static, aberrations, field, u):
+def _concrete_choice(static, aberrations, field, u, signal=None, noise=None):
     """``(plan index, tier by strength, radial symmetry, strength, cancellation)`` of a
     design (``_tier_of``; symmetry False if no one-ray plan applies; the cancellation 1
     below ``CANCELLING_STRENGTH``, where no warning looks at it)."""
     aberrations = aberrations.without_tilt()
     symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
-    index, by_strength, cancellation = _tier_of(static, aberrations, field, u, cancelling=True)
+    index, by_strength, cancellation = _tier_of(static, aberrations, field, u, signal, noise,
+                                                cancelling=True)
     return (index, by_strength, jnp.asarray(symmetric), _strength(aberrations, field, u),
             cancellation)
 
@@ -2097,7 +2150,7 @@ def _concrete_merit(static, inputs, warn=False):
     dtype = static.value[3]
     plans = _base_plans(static, inputs[0])
     index, by_strength, symmetric, strength, cancellation = (
-        x.item() for x in _concrete_choice(static, *inputs[:3]))
+        x.item() for x in _concrete_choice(static, *inputs))
     strong, steep, cancelling, slope = _beyond_checked(
         strength, float(inputs[2]), symmetric, cancellation,
         balanced=static.value[4] is not None)

@@ -104,6 +104,60 @@ def test_tier_index_honours_both_bounds():
     assert [t[0] for t in tiers] == sorted(t[0] for t in tiers) and tiers[-1][0] == math.inf
 
 
+def test_tier_index_skips_the_weak_tiers_at_high_ring_snr():
+    """Above ``WEAK_TIER_SNR`` a design skips tier 0, then tier 1 (tier 2 keeps its own u
+    bound); a caller's own tiers ignore the SNR."""
+    from jmse_jax._merit import WEAK_TIER_SNR
+
+    tiers = jj.DEFAULT_TIERS
+    low, high = WEAK_TIER_SNR
+    assert int(_tier_index(0.5, 0.2, tiers, 0.5 * low)) == 0
+    assert int(_tier_index(0.5, 0.2, tiers, 2.0 * low)) == 1
+    assert int(_tier_index(0.5, 0.2, tiers, 2.0 * high)) == 2
+    assert int(_tier_index(3.0, 0.2, tiers, 0.5 * high)) == 1
+    assert int(_tier_index(3.0, 0.2, tiers, 2.0 * high)) == 2
+    assert int(_tier_index(3.0, 0.8, tiers, 2.0 * high)) == 3  # tier 2 stops at 1/sqrt(2)
+    assert int(_tier_index(10.0, 0.2, tiers, 2.0 * high)) == 4  # the steep tier, as before
+    own = tuple((b, ub, dict(g), s) for b, ub, g, s in tiers[:3]) + (
+        (math.inf, math.inf, dict(tiers[3][2]), None),)
+    assert int(_tier_index(0.5, 0.2, own, 2.0 * high)) == 0
+
+
+def test_ring_snr_is_the_spectra_at_the_innermost_ring():
+    """``_ring_snr``: S_x / S_n at 0.3 u / strength (at most sqrt(2) u), from the closed
+    forms of ``MarkovSignal`` and ``WhiteNoise``."""
+    from jmse_jax._merit import _ring_snr
+
+    signal, noise = jj.MarkovSignal(2.0, 1.5), jj.WhiteNoise(1e-4)
+
+    def expected(nu):
+        return 2.0 * 2 * math.pi * 1.5 ** 2 / (1 + (2 * math.pi * 1.5 * nu) ** 2) ** 1.5 / 1e-4
+
+    assert float(_ring_snr(2.0, 0.2, signal, noise)) == pytest.approx(expected(0.03), rel=1e-12)
+    assert float(_ring_snr(0.01, 0.2, signal, noise)) == pytest.approx(
+        expected(math.sqrt(2) * 0.2), rel=1e-12)
+
+
+# Near the axis (field 0.07) 2.5 waves of defocus at u = 0.096 (strength 0.78, tier 0 by
+# strength) put a zero ring of the OTF inside the band; with a flat signal spectrum
+# (correlation length 1.35) at a peak SNR of 1.9e6, inside CHECKED_SNR, tier 0's grid was
+# 1.3e-2 off and tier 1's 1.4e-4 (session 80's adversarial climb, default_climb.py).
+RING_DESIGN = (jj.Seidel(w020=-2.51, w040=-0.1131, w131=1.8707, w222=-0.0014, w220=0.47),
+               0.06676, 0.09612, jj.MarkovSignal(1.0, 1.3455), jj.WhiteNoise(6.0293e-6))
+
+
+def test_a_ring_at_high_snr_near_the_axis_skips_the_weak_tiers():
+    """The default takes tier 2 there and is within 1e-7 of tier 2's grid with closed-form
+    peaks (2e-8 from a converged grid); tier 0's own grid, which it took before, is more
+    than 1e-3 off that oracle."""
+    ab, field, u, signal, noise = RING_DESIGN
+    oracle = float(jj.jmse(*RING_DESIGN, **{**jj.DEFAULT_TIERS[2][2], "peaks": True}))
+    assert float(jj.aberration_strength(ab, field, u)) < jj.DEFAULT_TIERS[0][0]
+    assert _route(*RING_DESIGN)["tier"] == 2
+    assert float(jj.jmse(*RING_DESIGN)) == pytest.approx(oracle, rel=1e-7)
+    assert abs(float(jj.jmse(*RING_DESIGN, **jj.DEFAULT_TIERS[0][2])) / oracle - 1) > 1e-3
+
+
 def _fixed(ab, field, u, grid):
     """The fixed ``grid``'s value, from one compiled program per grid (field and ``u`` are
     arguments, so the designs of every test share it)."""
