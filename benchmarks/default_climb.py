@@ -14,14 +14,26 @@ error cannot be the reference's.
 Usage (from the repository root; about 25 min on 2 cores with the defaults)::
 
     .venv/bin/python benchmarks/default_climb.py [--designs 150] [--starts 6] [--steps 30]
-        [--preset default] [--seed 0]
+        [--preset default] [--seed 0] [--start JSON]
 
-Writes ``results/default_climb.json`` and ``.md`` (``--preset high``: ``default_climb_high``).
+``--start`` climbs from one given design instead of a sample's worst (``--designs 0``), as a
+JSON object with ``coefficients`` (the five Seidel terms), ``field``, ``u``,
+``correlation_length``, ``noise`` and ``scale`` (the step's size is 10 % of it). Session
+80's longer climb, at 71e64e4 (before the fix it found)::
+
+    .venv/bin/python benchmarks/default_climb.py --designs 0 --steps 60 --seed 7 --start \
+        '{"scale": 2, "coefficients": {"w020": -1.9746, "w040": 0.1858, "w131": 1.6254,
+          "w222": 0.8552, "w220": 0.2196}, "field": 0.117, "u": 0.17,
+          "correlation_length": 1.895, "noise": 9.38e-5}'
+
+Writes ``results/default_climb.json`` and ``.md`` (``--preset high``: ``default_climb_high``;
+``--start``: ``default_climb_given`` and ``--tag``).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 import warnings
@@ -95,6 +107,9 @@ def main(argv=None):
     parser.add_argument("--steps", type=int, default=30)
     parser.add_argument("--preset", default="default")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--start", type=json.loads, default=None,
+                        help="climb from this design (JSON), see the module docstring")
+    parser.add_argument("--tag", default="", help="suffix of the results' name with --start")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     start = time.perf_counter()
@@ -103,11 +118,14 @@ def main(argv=None):
         row = _evaluate(_random_row(rng), args.preset)
         if row is not None:
             sample.append(dict(row, design=i))
+    worst = max((r["error"] for r in sample), default=float("nan"))
     print(f"{len(sample)} of {args.designs} random designs in the checked range; worst "
-          f"{max(r['error'] for r in sample):.2e} [{time.perf_counter() - start:.0f} s]",
-          flush=True)
+          f"{worst:.2e} [{time.perf_counter() - start:.0f} s]", flush=True)
+    starts = sorted(sample, key=lambda r: -r["error"])[:args.starts]
+    if args.start is not None:
+        starts = [dict(_evaluate(args.start, args.preset), design="given")]
     climbs = []
-    for row in sorted(sample, key=lambda r: -r["error"])[:args.starts]:
+    for row in starts:
         best, improved = row, 0
         for _ in range(args.steps):
             candidate = _evaluate(_step(best, rng), args.preset)
@@ -121,7 +139,7 @@ def main(argv=None):
               f"after {improved} improvements, tier {best['tier']} path {best['path']}, "
               f"reference moves {best['reference_change']:.1e} on the finer grid "
               f"[{time.perf_counter() - start:.0f} s]", flush=True)
-    errors = np.array([r["error"] for r in sample])
+    errors = np.array([r["error"] for r in sample] or [np.nan])
     lines = [f"# Adversarial accuracy of `preset={args.preset!r}`", "",
              f"`python benchmarks/default_climb.py --designs {args.designs} --starts "
              f"{args.starts} --steps {args.steps} --preset {args.preset} --seed {args.seed}`",
@@ -142,6 +160,7 @@ def main(argv=None):
             f"{w['correlation_length']:.3f}, noise {w['noise']:.3g} |")
     print("\n".join(lines))
     name = "default_climb" if args.preset == "default" else f"default_climb_{args.preset}"
+    name += "" if args.start is None else "_given" + args.tag
     common.write_report(name, dict(machine=common.machine_info(), preset=args.preset,
                                    reference=REFERENCE, finer=FINER, sample=sample,
                                    climbs=climbs), lines)
