@@ -33,6 +33,7 @@ from ._merit import (
     OVERLAP_FLOOR as OVERLAP_FLOOR,
     PRESETS as PRESETS,
     STEEP_SLOPE as STEEP_SLOPE,
+    WEAK_TIER_SNR as WEAK_TIER_SNR,
     TierShortcut as TierShortcut,
     aberration_strength as aberration_strength,
     baseline_jmse as baseline_jmse,

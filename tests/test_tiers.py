@@ -107,10 +107,8 @@ def test_tier_index_honours_both_bounds():
 def test_tier_index_skips_the_weak_tiers_at_high_ring_snr():
     """Above ``WEAK_TIER_SNR`` a design skips tier 0, then tier 1 (tier 2 keeps its own u
     bound); a caller's own tiers ignore the SNR."""
-    from jmse_jax._merit import WEAK_TIER_SNR
-
     tiers = jj.DEFAULT_TIERS
-    low, high = WEAK_TIER_SNR
+    low, high = jj.WEAK_TIER_SNR
     assert int(_tier_index(0.5, 0.2, tiers, 0.5 * low)) == 0
     assert int(_tier_index(0.5, 0.2, tiers, 2.0 * low)) == 1
     assert int(_tier_index(0.5, 0.2, tiers, 2.0 * high)) == 2
