@@ -42,6 +42,7 @@ import jmse_jax as jj  # noqa: E402
 from jmse_jax._merit import (  # noqa: E402
     _compiled_check,
     _compiled_estimated,
+    _first_kept,
     _prepare,
     _Static,
     _strength,
@@ -69,9 +70,8 @@ def _first_grid_state(args):
     check = float(_compiled_check(_Static(check_grid), dtype, inputs))
     first, estimate = _compiled_estimated(_Static(first_grid), dtype, inputs)
     first, estimate = float(first), float(estimate)
-    agree = abs(first - check) / abs(first)
-    kept = agree <= rtol and estimate <= first_tol
-    return tier, kept, first, estimate, agree
+    kept = bool(_first_kept(first, estimate, check, rtol, first_tol))  # the library's rule
+    return tier, kept, first, estimate, abs(first - check) / abs(first)
 
 
 def _measure(name, design, state):

@@ -1921,22 +1921,18 @@ def _tier_of(static, aberrations, field, u, signal=None, noise=None, cancelling=
             lambda *_: cancellation, aberrations, field, u)
     # Without tiers (``"high"``) the one fixed grid is plan 0, the steep grid plan 1 (taken,
     # as the default's steep tier, past ``STEEP_SLOPE``) and the balanced grid the last.
-    by_strength = None
     if tiers is not None:
         u_ = jax.lax.stop_gradient(u)
-        by_strength = _tier_index(strength, u_, tiers)
-        tier = by_strength
+        tier = by_strength = _tier_index(strength, u_, tiers)
         if signal is not None and _snr_bounds(tiers):
             snr = jax.lax.stop_gradient(_ring_snr(strength, u_, signal, noise))
             tier = _tier_index(strength, u_, tiers, snr.astype(strength.dtype))
     elif steep is not None:
         # "high": its steep grid past STEEP_SLOPE or HIGH_STRONG_STRENGTH.
-        tier = (_steep(strength, jax.lax.stop_gradient(u))
-                | (strength > HIGH_STRONG_STRENGTH)).astype(jnp.int32)
+        tier = by_strength = (_steep(strength, jax.lax.stop_gradient(u))
+                              | (strength > HIGH_STRONG_STRENGTH)).astype(jnp.int32)
     else:
-        tier = zero
-    if by_strength is None:
-        by_strength = tier
+        tier = by_strength = zero
     if balanced is None:
         return tier, by_strength, cancellation
     balancing = _balancing(strength, cancellation)
