@@ -26,6 +26,15 @@ JSON object with ``coefficients`` (the five Seidel terms), ``field``, ``u``,
           "w222": 0.8552, "w220": 0.2196}, "field": 0.117, "u": 0.17,
           "correlation_length": 1.895, "noise": 9.38e-5}'
 
+``--family zernike`` climbs on Zernike designs instead (Noll 4 to ``--noll``, default 22;
+coefficients normal with deviation ``scale / n`` for radial order ``n``, scale 0.1-2,
+stepped by 10 % of that plus 0.05 / n; the field is ignored), and ``--signal powerlaw``
+under ``PowerLawSignal(amplitude, exponent, knee)`` instead of ``MarkovSignal(1, mu)``
+(exponent 1.5-3, knee 10^-2.5 to 10^-0.5, amplitude 10^-4 to 1; steps of 0.15 in the
+exponent and factors of e^0.3 and e^0.5 in the knee and amplitude). Either adds to the
+results' name (``default_climb_zernike``, ``default_climb_powerlaw``,
+``default_climb_high_zernike``...).
+
 Writes ``results/default_climb.json`` and ``.md`` (``--preset high``: ``default_climb_high``;
 ``--start``: ``default_climb_given`` and ``--tag``).
 """
@@ -46,6 +55,7 @@ import _common as common  # noqa: E402 - turns on float64
 import numpy as np  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
+from jmse_jax._aberrations import noll_to_nm  # noqa: E402
 from jmse_jax._merit import _route  # noqa: E402
 
 TERMS = ("w020", "w040", "w131", "w222", "w220")
@@ -55,9 +65,21 @@ FINER = dict(nodes=(200, 80), se_nodes=(8000, 1200), overlap_nodes=(160, 160),
              overlap_floor=160, peaks=True)
 
 
+def _aberrations(row):
+    if "noll" in row:
+        return jj.Zernike(row["coefficients"], noll=tuple(row["noll"]))
+    return jj.Seidel(**row["coefficients"])
+
+
+def _signal(row):
+    if "exponent" in row:
+        return jj.PowerLawSignal(row["amplitude"], row["exponent"], row["knee"])
+    return jj.MarkovSignal(1.0, row["correlation_length"])
+
+
 def _design(row):
-    return (jj.Seidel(**row["coefficients"]), row["field"], row["u"],
-            jj.MarkovSignal(1.0, row["correlation_length"]), jj.WhiteNoise(row["noise"]))
+    return (_aberrations(row), row["field"], row["u"], _signal(row),
+            jj.WhiteNoise(row["noise"]))
 
 
 def _evaluate(row, preset):
@@ -78,26 +100,77 @@ def _evaluate(row, preset):
                 balanced=route.get("balanced"), one_ray=route.get("one_ray"))
 
 
-def _random_row(rng):
-    scale = float(rng.choice([0.5, 1.0, 2.0, 4.0, 8.0]))
-    return dict(scale=scale,
-                coefficients={k: float(rng.uniform(-scale, scale)) for k in TERMS},
+def _orders(noll):
+    return np.array([noll_to_nm(j)[0] for j in noll], float)
+
+
+def _random_row(rng, family="seidel", signal="markov", noll=22):
+    scale = float(rng.choice([0.5, 1.0, 2.0, 4.0, 8.0] if family == "seidel"
+                             else [0.1, 0.25, 0.5, 1.0, 2.0]))
+    if family == "zernike":
+        indices = list(range(4, noll + 1))
+        aberrations = dict(noll=indices, coefficients=(
+            rng.normal(size=len(indices)) * scale / _orders(indices)).tolist())
+    else:
+        aberrations = dict(coefficients={k: float(rng.uniform(-scale, scale)) for k in TERMS})
+    if signal == "powerlaw":
+        spectrum = dict(amplitude=float(10 ** rng.uniform(-4, 0)),
+                        exponent=float(rng.uniform(1.5, 3.0)),
+                        knee=float(10 ** rng.uniform(-2.5, -0.5)))
+    else:
+        spectrum = dict(correlation_length=float(rng.uniform(2, 10)))
+    return dict(scale=scale, **aberrations,
                 field=float(rng.uniform(0, 1)), u=float(rng.choice([0.1, 0.2, 0.3, 0.5, 0.7,
                                                                      0.85, 1.0])),
-                correlation_length=float(rng.uniform(2, 10)),
-                noise=float(10 ** rng.uniform(-5, -2)))
+                **spectrum, noise=float(10 ** rng.uniform(-5, -2)))
 
 
 def _step(row, rng):
     size = 0.1 * row["scale"] + 0.05
-    return dict(scale=row["scale"],
-                coefficients={k: v + float(rng.normal(0, size))
-                              for k, v in row["coefficients"].items()},
+    if "noll" in row:
+        step = rng.normal(size=len(row["noll"])) * size / _orders(row["noll"])
+        aberrations = dict(noll=row["noll"],
+                           coefficients=(np.asarray(row["coefficients"]) + step).tolist())
+    else:
+        aberrations = dict(coefficients={k: v + float(rng.normal(0, size))
+                                         for k, v in row["coefficients"].items()})
+    if "exponent" in row:
+        spectrum = dict(
+            amplitude=float(np.clip(row["amplitude"] * np.exp(rng.normal(0, 0.5)), 1e-6, 10)),
+            exponent=float(np.clip(row["exponent"] + rng.normal(0, 0.15), 1.0, 4.0)),
+            knee=float(np.clip(row["knee"] * np.exp(rng.normal(0, 0.3)), 1e-3, 1.0)))
+    else:
+        spectrum = dict(correlation_length=float(np.clip(
+            row["correlation_length"] * np.exp(rng.normal(0, 0.3)), 1, 20)))
+    return dict(scale=row["scale"], **aberrations,
                 field=float(np.clip(row["field"] + rng.normal(0, 0.1), 0, 1)),
                 u=float(np.clip(row["u"] + rng.normal(0, 0.05), 0.05, 1.2)),
-                correlation_length=float(np.clip(
-                    row["correlation_length"] * np.exp(rng.normal(0, 0.3)), 1, 20)),
+                **spectrum,
                 noise=float(np.clip(row["noise"] * np.exp(rng.normal(0, 0.5)), 1e-6, 1e-2)))
+
+
+def _describe(row):
+    """The design of ``row`` in a table cell."""
+    if "noll" in row:
+        terms = ", ".join(f"Z{j} {c:.3f}" for j, c in zip(row["noll"], row["coefficients"],
+                                                                strict=True)
+                          if abs(c) >= 0.05)
+        text = f"Zernike {terms}"
+    else:
+        text = f"{ {k: round(v, 4) for k, v in row['coefficients'].items()} }, field " \
+               f"{row['field']:.3f}"
+    text += f", u {row['u']:.3f}, "
+    if "exponent" in row:
+        text += (f"power law amplitude {row['amplitude']:.3g}, exponent "
+                 f"{row['exponent']:.3f}, knee {row['knee']:.3g}")
+    else:
+        text += f"correlation length {row['correlation_length']:.3f}"
+    return text + f", noise {row['noise']:.3g}"
+
+
+def _family_flags(args):
+    flags = "" if args.family == "seidel" else f" --family {args.family} --noll {args.noll}"
+    return flags + ("" if args.signal == "markov" else f" --signal {args.signal}")
 
 
 def main(argv=None):
@@ -110,12 +183,16 @@ def main(argv=None):
     parser.add_argument("--start", type=json.loads, default=None,
                         help="climb from this design (JSON), see the module docstring")
     parser.add_argument("--tag", default="", help="suffix of the results' name with --start")
+    parser.add_argument("--family", default="seidel", choices=("seidel", "zernike"))
+    parser.add_argument("--noll", type=int, default=22,
+                        help="highest Noll index of --family zernike (from 4)")
+    parser.add_argument("--signal", default="markov", choices=("markov", "powerlaw"))
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     start = time.perf_counter()
     sample = []
     for i in range(args.designs):
-        row = _evaluate(_random_row(rng), args.preset)
+        row = _evaluate(_random_row(rng, args.family, args.signal, args.noll), args.preset)
         if row is not None:
             sample.append(dict(row, design=i))
     worst = max((r["error"] for r in sample), default=float("nan"))
@@ -142,7 +219,8 @@ def main(argv=None):
     errors = np.array([r["error"] for r in sample] or [np.nan])
     lines = [f"# Adversarial accuracy of `preset={args.preset!r}`", "",
              f"`python benchmarks/default_climb.py --designs {args.designs} --starts "
-             f"{args.starts} --steps {args.steps} --preset {args.preset} --seed {args.seed}`",
+             f"{args.starts} --steps {args.steps} --preset {args.preset} --seed {args.seed}"
+             f"{_family_flags(args)}`",
              "", common.machine_line(common.machine_info(), common.load_average()), "",
              f"Random sample: {len(sample)} of {args.designs} designs in the checked range; "
              f"error median {np.median(errors):.1e}, worst {errors.max():.2e}. Reference "
@@ -154,14 +232,14 @@ def main(argv=None):
         lines.append(
             f"| {c['start']['design']} | {c['start']['error']:.2e} | {w['error']:.2e} | "
             f"{w['error_finer']:.2e} | {w['reference_change']:.1e} | {w['strength']:.2f} | "
-            f"{w['tier']} | {w['path']} | "
-            f"{ {k: round(v, 4) for k, v in w['coefficients'].items()} }, field "
-            f"{w['field']:.3f}, u {w['u']:.3f}, correlation length "
-            f"{w['correlation_length']:.3f}, noise {w['noise']:.3g} |")
+            f"{w['tier']} | {w['path']} | {_describe(w)} |")
     print("\n".join(lines))
     name = "default_climb" if args.preset == "default" else f"default_climb_{args.preset}"
+    name += "" if args.family == "seidel" else f"_{args.family}"
+    name += "" if args.signal == "markov" else f"_{args.signal}"
     name += "" if args.start is None else "_given" + args.tag
     common.write_report(name, dict(machine=common.machine_info(), preset=args.preset,
+                                   family=args.family, signal=args.signal,
                                    reference=REFERENCE, finer=FINER, sample=sample,
                                    climbs=climbs), lines)
 

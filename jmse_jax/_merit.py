@@ -156,6 +156,30 @@ CHECKED_SNR_PEAKS = 2e8
 #: (4800 fine radial nodes) 2.1e-8 at 1.6e6. The paper's Fig. 1 point (ring SNR 9.9e4)
 #: keeps tier 1, and so does the same design at noise 1e-4 (9.9e5).
 WEAK_TIER_SNR = (3e4, 1e6)
+#: Largest ``S_x / S_n`` at the band's edge (``_edge_snr``: at its corner ``sqrt(2) u``, or
+#: at the cutoff for a band that reaches it) at which the default's tiers 1 to 3 are used; a
+#: design above it takes the steep tier (``_STEEP_GRID``), and in ``"high"`` a band that
+#: reaches the cutoff takes ``HIGH_STEEP_GRID``. Under a flat signal spectrum at high SNR,
+#: ``S_e`` turns from ``S_n / |H|^2`` to ``S_x`` where ``|H|^2 S_x / S_n`` falls through 1,
+#: sharply where ``H`` is small: near the cutoff, where ``H`` falls as ``(1 - r)^{3/2}``,
+#: the radial interpolation of the OTF has to follow the turn (tier 1's 40 radial OTF nodes
+#: fall short on bands that reach it), and where the curve of the turn crosses the rays
+#: obliquely (the band's corner just inside the cutoff, the low rings of an astigmatic
+#: OTF) the fine angular rule has to resolve it (tier 2's 128 angular nodes, tier 3's 256).
+#: The tiers were calibrated under ``MarkovSignal`` spectra of correlation length 2-10,
+#: whose ``S_x / S_n`` at the band's edge stays low except at small ``u`` (the Fig. 1 point:
+#: 220; ``MarkovSignal(1, 5)`` at noise 1e-4 and u = 0.1: 1.7e4). Session 81's adversarial
+#: climbs under power-law spectra (``benchmarks/default_climb.py --signal powerlaw``) found
+#: tier 1 2.6e-4 off at u = 0.905 (``PowerLawSignal(2.11, 2.5, 1)``, noise 2.3e-6, SNR 3.8e5
+#: at the cutoff), tier 2 1.1e-3 at u = 0.703 (``PowerLawSignal(0.88, 2.64, 0.64)``, noise
+#: 2e-6, 2.9e5 at the corner) and 4.2e-4 at u = 0.454 (strength 5.4, SNR 2.8e5 at the
+#: corner), and tier 1 8.5e-5 at u = 0.11 (strength 4.9, slope 31, 1.8e5); the steep tier's
+#: grid holds each within 6e-7. On random designs under flat spectra
+#: (``benchmarks/edge_snr_tiers.py``) bands that reach the cutoff have tier 1 within 1.7e-5
+#: up to 3e4 and 9.8e-5 at 3e4-1e5, 7e-4 beyond, and ``"high"``'s own grid 3.9e-5 at 6e4;
+#: narrower bands show no error above 4.6e-6 at any SNR up to the checked peak (the climbs'
+#: designs are rare), and each of the climbs' failures lies above 5.9e4.
+EDGE_TIER_SNR = 3e4
 #: ``_ring_snr``'s innermost ring, as a multiple of ``u / aberration_strength``: the OTF's
 #: first zero where the phase difference across the overlap lens reaches about half a wave,
 #: ``nu ~ 1 / (4 max |grad W|)``, with the strength ``max |grad W| sqrt(2) u``: about
@@ -243,8 +267,18 @@ _FIRST_TOL = 1e-5
 _SHORTCUT = TierShortcut(trial=None, check=_CHECK_GRID, rtol=1e-5, u_max=_REACHES_CUTOFF_U,
                          first=_FIRST_GRID, first_tol=_FIRST_TOL)
 
-#: The fourth tier's grid; the steep tier's differs in its overlap rule only.
+#: The fourth tier's grid; the steep tier's (``_STEEP_GRID``) differs in its overlap rule
+#: and its fine angular count.
 _TIER3_GRID = dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(56, 40))
+#: The steep tier's grid: tier 3's with the overlap rule (64, 64) (``STEEP_SLOPE``) and, since
+#: session 81, 512 angular fine ``S_e`` nodes, for the designs that ``EDGE_TIER_SNR`` sends
+#: here: under a flat spectrum at high SNR ``S_e`` turns from ``S_n / |H|^2`` to ``S_x``
+#: along curves that the rays cross obliquely (the band's corner near the cutoff, the OTF's
+#: low rings of an astigmatic design), and tier 3's 256 angular nodes left 5.2e-5 (u = 0.703,
+#: ``PowerLawSignal(0.88, 2.64, 0.64)``, noise 2e-6) where 512 leave 6e-7. In tier 3 itself
+#: they cost 28 % of its time (``hypercube_2``: value 143 -> 183 ms, ``ab_compare.py``, one
+#: core), which its designs under ``MarkovSignal`` do not need.
+_STEEP_GRID = dict(_TIER3_GRID, se_nodes=(4800, 512), overlap_nodes=(64, 64), overlap_floor=64)
 
 #: Grids of the ``"default"`` preset by difficulty: ``(largest aberration_strength, largest
 #: u, grid options, shortcut)``; the first tier whose two bounds hold is used, and a design
@@ -295,7 +329,7 @@ DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
      None),
     (math.inf, math.inf, _TIER3_GRID, None),
     # The steep tier: reached only through STEEP_SLOPE (the tier before it has no bound).
-    (math.inf, math.inf, dict(_TIER3_GRID, overlap_nodes=(64, 64), overlap_floor=64), None),
+    (math.inf, math.inf, _STEEP_GRID, None),
 )
 #: Designs whose wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius]
 #: exceeds this take the last tier (the steep one) whatever their strength. The strength
@@ -345,8 +379,13 @@ STEEP_SLOPE = 35.0
 #: the tiers by strength held to this grid: 33 of the calibration's 426 random designs and
 #: two of the bank's off-axis cases
 #: (``kink_u0.85_shortcut``, 4.5e-7 off in tier 1, and ``kink_u0.8_strong``, 7.9e-8 in tier
-#: 3), which now cost 0.43 s instead of 9 and 42 ms (a value, concrete call).
-BALANCED_GRID = dict(nodes=(160, 48), se_nodes=(4800, 256), overlap_nodes=(96, 96),
+#: 3), which now cost 0.43 s instead of 9 and 42 ms (a value, concrete call). Its angular
+#: fine count is 512 since session 81 (was 256): under flat power-law spectra at high SNR
+#: the turn of ``S_e`` from ``S_n / |H|^2`` to ``S_x`` crosses the rays obliquely
+#: (``EDGE_TIER_SNR``), and a climb there found a design that cancels 2.4e-4 off with 256
+#: (u = 0.195, strength 2.6, ``PowerLawSignal(0.65, 2.78, 0.18)``, noise 9.4e-5; 5.6e-6 with
+#: 512), at 9 % more of the grid's time (489 -> 530 ms, jitted value).
+BALANCED_GRID = dict(nodes=(160, 48), se_nodes=(4800, 512), overlap_nodes=(96, 96),
                      overlap_floor=64, peaks=True)
 #: The balanced grid of the ``"high"`` preset, taken (as ``BALANCED_GRID`` in the default) by
 #: designs off the axis whose terms cancel (``BALANCED_CANCELLATION``). On the 488 designs
@@ -1016,18 +1055,30 @@ def _ring_snr(strength, u, signal, noise):
     return signal(nu, zero) / noise(nu, zero)
 
 
-def _tier_index(strength, u, tiers, snr=None):
+def _edge_snr(u, signal, noise):
+    """``S_x / S_n`` at the band's edge, ``min(sqrt(2) u, 1)`` from the origin (along the
+    ``nu_x`` axis; the package's spectra are isotropic); traceable."""
+    nu = jnp.minimum(jnp.sqrt(2.0) * u, 1.0)
+    zero = jnp.zeros_like(nu)
+    return signal(nu, zero) / noise(nu, zero)
+
+
+def _tier_index(strength, u, tiers, snr=None, edge_snr=None):
     """Index of the first tier whose bounds hold (traceable; the last tier has none); a
     design steeper than ``STEEP_SLOPE`` takes the last tier. With the ring SNR ``snr``
     (``_ring_snr``) and the default's tiers, a tier ``i`` of ``WEAK_TIER_SNR``'s is skipped
-    above its bound there (``_snr_bounds``)."""
+    above its bound there (``_snr_bounds``); with the SNR at the cutoff ``edge_snr``
+    (``_edge_snr``), tier 1 above ``EDGE_TIER_SNR``."""
     snr_bounds = () if snr is None else _snr_bounds(tiers)
+    edge_bounds = () if edge_snr is None else _edge_bounds(tiers)
     index = jnp.zeros((), jnp.int32)
     past = jnp.asarray(True)
     for i, (bound, u_bound, *_) in enumerate(tiers[:-1]):
         skip = (strength > bound) | (u > u_bound)
         if i < len(snr_bounds):
             skip = skip | (snr > snr_bounds[i])
+        if i < len(edge_bounds):
+            skip = skip | (edge_snr > edge_bounds[i])
         past = past & skip
         index = index + past.astype(jnp.int32)
     return jnp.where(_steep(strength, u), len(tiers) - 1, index).astype(jnp.int32)
@@ -1037,6 +1088,13 @@ def _snr_bounds(tiers):
     """``WEAK_TIER_SNR`` for the default's tiers (calibrated on their grids), else none: a
     caller's own tiers are chosen by strength and ``u`` alone."""
     return WEAK_TIER_SNR if tiers == DEFAULT_TIERS else ()
+
+
+def _edge_bounds(tiers):
+    """The bounds on ``_edge_snr`` of the default's tiers (``EDGE_TIER_SNR`` on tiers 1
+    to 3, so that such a design takes the steep tier), else none."""
+    b = EDGE_TIER_SNR
+    return (math.inf, b, b, b) if tiers == DEFAULT_TIERS else ()
 
 
 def _steep(strength, u, slope=STEEP_SLOPE):
@@ -1891,7 +1949,9 @@ def _tier_of(static, aberrations, field, u, signal=None, noise=None, cancelling=
     """``(index, tier, cancellation)``: the plan (of ``_base_plans``) this design takes, its
     tier by ``aberration_strength`` alone (``_tier_index``), which picks its one-ray plan,
     and its ``_cancellation`` (all traceable). With the spectra, the default's weak tiers
-    are skipped above ``WEAK_TIER_SNR`` (for the plan, not the one-ray plan's choice). A
+    are skipped above ``WEAK_TIER_SNR`` and tiers 1 to 3 above ``EDGE_TIER_SNR`` (and
+    ``"high"`` takes its steep grid there on bands that reach the cutoff), for the plan, not
+    the one-ray plan's choice. A
     design whose terms cancel (``_balancing``) takes the balanced tier. One beyond Seidel's
     shapes (``beyond_seidel_degree``, e.g. a Zernike term of radial order 5 or more, or
     trefoil) takes, from
@@ -1926,11 +1986,19 @@ def _tier_of(static, aberrations, field, u, signal=None, noise=None, cancelling=
         tier = by_strength = _tier_index(strength, u_, tiers)
         if signal is not None and _snr_bounds(tiers):
             snr = jax.lax.stop_gradient(_ring_snr(strength, u_, signal, noise))
-            tier = _tier_index(strength, u_, tiers, snr.astype(strength.dtype))
+            edge = jax.lax.stop_gradient(_edge_snr(u_, signal, noise))
+            tier = _tier_index(strength, u_, tiers, snr.astype(strength.dtype),
+                               edge.astype(strength.dtype))
     elif steep is not None:
-        # "high": its steep grid past STEEP_SLOPE or HIGH_STRONG_STRENGTH.
-        tier = by_strength = (_steep(strength, jax.lax.stop_gradient(u))
+        # "high": its steep grid past STEEP_SLOPE or HIGH_STRONG_STRENGTH, and on bands that
+        # reach the cutoff past EDGE_TIER_SNR there.
+        u_ = jax.lax.stop_gradient(u)
+        tier = by_strength = (_steep(strength, u_)
                               | (strength > HIGH_STRONG_STRENGTH)).astype(jnp.int32)
+        if signal is not None:
+            edge = jax.lax.stop_gradient(_edge_snr(u_, signal, noise))
+            tier = tier | ((u_ > _REACHES_CUTOFF_U)
+                           & (edge > EDGE_TIER_SNR)).astype(jnp.int32)
     else:
         tier = by_strength = zero
     if balanced is None:

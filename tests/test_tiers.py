@@ -151,9 +151,103 @@ def test_a_ring_at_high_snr_near_the_axis_skips_the_weak_tiers():
     ab, field, u, signal, noise = RING_DESIGN
     oracle = float(jj.jmse(*RING_DESIGN, **{**jj.DEFAULT_TIERS[2][2], "peaks": True}))
     assert float(jj.aberration_strength(ab, field, u)) < jj.DEFAULT_TIERS[0][0]
-    assert _route(*RING_DESIGN)["tier"] == 2
+    assert _route(*RING_DESIGN)["tier"] == 4
     assert float(jj.jmse(*RING_DESIGN)) == pytest.approx(oracle, rel=1e-7)
     assert abs(float(jj.jmse(*RING_DESIGN, **jj.DEFAULT_TIERS[0][2])) / oracle - 1) > 1e-3
+
+
+def test_tier_index_skips_tiers_1_to_3_at_high_snr_at_the_band_edge():
+    """Above ``EDGE_TIER_SNR`` at the band's edge a design of tiers 1 to 3 takes the steep
+    tier; below it, or for a caller's own tiers, the tier by strength stands."""
+    tiers, bound = jj.DEFAULT_TIERS, jj.EDGE_TIER_SNR
+    assert int(_tier_index(3.0, 0.8, tiers, 0.0, 0.5 * bound)) == 1
+    assert int(_tier_index(3.0, 0.8, tiers, 0.0, 2.0 * bound)) == 4
+    assert int(_tier_index(3.0, 0.3, tiers, 0.0, 2.0 * bound)) == 4
+    assert int(_tier_index(10.0, 0.7, tiers, 0.0, 0.5 * bound)) == 2
+    assert int(_tier_index(10.0, 0.7, tiers, 0.0, 2.0 * bound)) == 4
+    assert int(_tier_index(20.0, 0.5, tiers, 0.0, 0.5 * bound)) == 3
+    assert int(_tier_index(20.0, 0.5, tiers, 0.0, 2.0 * bound)) == 4
+    # Tier 0 has no edge bound (the ring SNR, WEAK_TIER_SNR, holds its designs).
+    assert int(_tier_index(0.5, 0.3, tiers, 0.0, 2.0 * bound)) == 0
+    own = tuple((b, ub, dict(g), s) for b, ub, g, s in tiers[:3]) + (
+        (math.inf, math.inf, dict(tiers[3][2]), None),)
+    assert int(_tier_index(3.0, 0.8, own, 0.0, 2.0 * bound)) == 1
+
+
+def test_edge_snr_is_the_spectra_at_the_band_edge():
+    """``_edge_snr``: S_x / S_n from ``PowerLawSignal``'s closed form at the band's corner
+    ``sqrt(2) u``, or at the cutoff for a band that reaches it."""
+    from jmse_jax._merit import _edge_snr
+
+    signal, noise = jj.PowerLawSignal(2.0, 2.5, 0.5), jj.WhiteNoise(1e-5)
+
+    def expected(nu):
+        return 2.0 / (0.5 ** 2 + nu ** 2) ** 1.25 / 1e-5
+
+    assert float(_edge_snr(0.8, signal, noise)) == pytest.approx(expected(1.0), rel=1e-12)
+    assert float(_edge_snr(1.2, signal, noise)) == pytest.approx(expected(1.0), rel=1e-12)
+    for u in (0.7, 0.3, 0.05):
+        assert float(_edge_snr(u, signal, noise)) == pytest.approx(
+            expected(u * math.sqrt(2)), rel=1e-12)
+
+
+# A weak design (strength 1.2, tier 1 by strength) on a band reaching the cutoff, u = 0.905,
+# under a flat power-law spectrum at SNR 3.8e5 at the cutoff (peak 9e5, inside CHECKED_SNR):
+# tier 1's 40 radial OTF nodes were 2.6e-4 off (session 81's climb under power-law spectra,
+# default_climb.py --signal powerlaw).
+EDGE_DESIGN = (jj.Seidel(w020=-0.1518, w040=0.1118, w131=0.4855, w222=0.3675, w220=0.1166),
+               0.624, 0.905, jj.PowerLawSignal(2.11, 2.499, 1.0), jj.WhiteNoise(2.34e-6))
+
+
+# u just below 1/sqrt(2): the band's corner (0.994) lies just inside the cutoff, at an SNR of
+# 2.9e5 there (peak 1.4e6) under a flat power-law spectrum; strength 3.3, tier 1 by strength
+# (5.5e-4 off), tier 2's grid 1.2e-3 off (session 81's climb from a corner design).
+CORNER_DESIGN = (jj.Seidel(w020=1.4338, w040=-0.2546, w131=-0.7411, w222=-1.5247, w220=-1.19),
+                 0.827, 0.703, jj.PowerLawSignal(0.88, 2.638, 0.643), jj.WhiteNoise(1.97e-6))
+
+
+def test_a_band_whose_corner_is_near_the_cutoff_at_high_snr_takes_the_steep_tier():
+    """The default takes the steep tier there (512 angular fine nodes) and is within 2e-6
+    of tier 3's grid with 960 (6e-7 from a converged grid); tiers 1 and 2 are more than
+    1e-4 off that oracle, and tier 3 with its own 256 more than 2e-5."""
+    oracle = float(jj.jmse(*CORNER_DESIGN, **{**jj.DEFAULT_TIERS[3][2],
+                                             "se_nodes": (4800, 960)}))
+    assert _route(*CORNER_DESIGN)["tier"] == 4
+    assert float(jj.jmse(*CORNER_DESIGN)) == pytest.approx(oracle, rel=2e-6)
+    for grid in (jj.DEFAULT_TIERS[1][2], jj.DEFAULT_TIERS[2][2]):
+        assert abs(float(jj.jmse(*CORNER_DESIGN, **grid)) / oracle - 1) > 1e-4
+    assert abs(float(jj.jmse(*CORNER_DESIGN, **jj.DEFAULT_TIERS[3][2])) / oracle - 1) > 2e-5
+
+
+# A band reaching the cutoff (u = 0.905, strength 13.7) under a flat power-law spectrum at
+# SNR 6.2e4 there: "high"'s own grid (80 radial OTF nodes) was 3.9e-5 off
+# (benchmarks/edge_snr_tiers.py); past EDGE_TIER_SNR it takes HIGH_STEEP_GRID (128).
+HIGH_EDGE_DESIGN = (jj.Seidel(w020=3.7096, w040=-0.49412, w131=0.78185, w222=3.70915,
+                              w220=1.76912), 0.78934, 0.90480,
+                    jj.PowerLawSignal(1.0, 1.58362, 0.60722), jj.WhiteNoise(1.25561e-5))
+
+
+def test_high_takes_its_steep_grid_at_high_snr_at_the_cutoff():
+    """``"high"`` takes ``HIGH_STEEP_GRID`` there and is within 1e-6 of an independent finer
+    grid; its own grid is more than 1e-5 off that oracle."""
+    oracle = float(jj.jmse(*HIGH_EDGE_DESIGN, nodes=(160, 64), se_nodes=(4800, 960),
+                           overlap_nodes=(96, 96), overlap_floor=96, peaks=True))
+    assert _route(*HIGH_EDGE_DESIGN, preset="high")["steep"]
+    assert float(jj.jmse(*HIGH_EDGE_DESIGN, preset="high")) == pytest.approx(oracle, rel=1e-6)
+    own = {k: jj.PRESETS["high"][k] for k in ("nodes", "se_nodes", "overlap_nodes",
+                                              "overlap_floor", "peaks")}
+    assert abs(float(jj.jmse(*HIGH_EDGE_DESIGN, **own)) / oracle - 1) > 1e-5
+
+
+def test_a_band_at_high_snr_at_the_cutoff_skips_tier_1():
+    """The default takes the steep tier there and is within 1e-7 of a grid with 160 radial
+    OTF nodes (tier 3's other counts); tier 1's own grid, which it took before, is more
+    than 1e-4 off that oracle."""
+    oracle = float(jj.jmse(*EDGE_DESIGN, **{**jj.DEFAULT_TIERS[3][2], "nodes": (160, 64)}))
+    assert float(jj.aberration_strength(*EDGE_DESIGN[:3])) < jj.DEFAULT_TIERS[1][0]
+    assert _route(*EDGE_DESIGN)["tier"] == 4
+    assert float(jj.jmse(*EDGE_DESIGN)) == pytest.approx(oracle, rel=1e-7)
+    assert abs(float(jj.jmse(*EDGE_DESIGN, **jj.DEFAULT_TIERS[1][2])) / oracle - 1) > 1e-4
 
 
 def _fixed(ab, field, u, grid):
