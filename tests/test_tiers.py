@@ -219,6 +219,23 @@ def test_a_band_whose_corner_is_near_the_cutoff_at_high_snr_takes_the_steep_tier
     assert abs(float(jj.jmse(*CORNER_DESIGN, **jj.DEFAULT_TIERS[3][2])) / oracle - 1) > 2e-5
 
 
+# Terms that cancel (the balanced tier) at u = 0.195 under a flat power-law spectrum at SNR
+# 1.5e5 at the band's corner: BALANCED_GRID with its former 256 angular fine nodes was
+# 2.4e-4 off (session 81's climb under power-law spectra), with 512 5.6e-6.
+BALANCED_FLAT_DESIGN = (jj.Seidel(w020=-4.9762, w040=4.2658, w131=0.5119, w222=-5.9652,
+                                  w220=1.7956), 0.809, 0.195,
+                        jj.PowerLawSignal(0.646, 2.779, 0.182), jj.WhiteNoise(9.36e-5))
+
+
+def test_the_balanced_tier_under_a_flat_spectrum_at_high_snr():
+    """The default takes the balanced tier there and is within 2e-5 of its grid with 960
+    angular fine nodes (the former 256 were 2.4e-4 off it)."""
+    oracle = float(jj.jmse(*BALANCED_FLAT_DESIGN, **{**jj.BALANCED_GRID,
+                                                    "se_nodes": (4800, 960)}))
+    assert _route(*BALANCED_FLAT_DESIGN)["balanced"]
+    assert float(jj.jmse(*BALANCED_FLAT_DESIGN)) == pytest.approx(oracle, rel=2e-5)
+
+
 # A band reaching the cutoff (u = 0.905, strength 13.7) under a flat power-law spectrum at
 # SNR 6.2e4 there: "high"'s own grid (80 radial OTF nodes) was 3.9e-5 off
 # (benchmarks/edge_snr_tiers.py); past EDGE_TIER_SNR it takes HIGH_STEEP_GRID (128).
