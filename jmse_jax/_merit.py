@@ -328,7 +328,8 @@ DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
     (15.0, _REACHES_CUTOFF_U, dict(nodes=(64, 40), se_nodes=(4800, 128), overlap_nodes=(40, 32)),
      None),
     (math.inf, math.inf, _TIER3_GRID, None),
-    # The steep tier: reached only through STEEP_SLOPE (the tier before it has no bound).
+    # The steep tier: reached only through STEEP_SLOPE and EDGE_TIER_SNR (the tier before it
+    # has no bound of its own).
     (math.inf, math.inf, _STEEP_GRID, None),
 )
 #: Designs whose wavefront slope ``max |grad W|`` (tilt removed) [waves per pupil radius]
@@ -1067,8 +1068,8 @@ def _tier_index(strength, u, tiers, snr=None, edge_snr=None):
     """Index of the first tier whose bounds hold (traceable; the last tier has none); a
     design steeper than ``STEEP_SLOPE`` takes the last tier. With the ring SNR ``snr``
     (``_ring_snr``) and the default's tiers, a tier ``i`` of ``WEAK_TIER_SNR``'s is skipped
-    above its bound there (``_snr_bounds``); with the SNR at the cutoff ``edge_snr``
-    (``_edge_snr``), tier 1 above ``EDGE_TIER_SNR``."""
+    above its bound there (``_snr_bounds``); with the SNR at the band's edge ``edge_snr``
+    (``_edge_snr``), tiers 1 to 3 above ``EDGE_TIER_SNR`` (``_edge_bounds``)."""
     snr_bounds = () if snr is None else _snr_bounds(tiers)
     edge_bounds = () if edge_snr is None else _edge_bounds(tiers)
     index = jnp.zeros((), jnp.int32)
