@@ -1,24 +1,26 @@
-"""The default's tiers on bands that reach the cutoff, at high SNR there.
+"""The default's tiers under flat signal spectra at high SNR at the band's edge.
 
-Above ``u = 1/sqrt(2)`` rays of the band reach the OTF's cutoff, where ``H`` falls as
-``(1 - r)^{3/2}``; where the signal is still strong there (a flat spectrum: a power law with
-a wide knee, a short correlation length), ``S_e`` turns from ``S_n / |H|^2`` to ``S_x``
-within a distance of the cutoff that falls with ``S_x / S_n``, and the radial interpolation
-of the OTF, not the fine ``S_e`` grid, has to follow it. The tiers were calibrated with
-``MarkovSignal`` spectra of correlation length 2-10 (``calibrate_tiers_kink.md``), whose
-``S_x / S_n`` at the cutoff stays below about 1e4; session 81's adversarial climb under
-power-law spectra (``default_climb.py --signal powerlaw``) found tier 1 2.6e-4 off at
-u = 0.9 with ``S_x / S_n`` of 3.8e5 at the cutoff. This script draws random Seidel designs
-of strength up to 5 (tier 1 by strength) with u 0.6-1.2 under flat spectra (half
-``PowerLawSignal(1, 1.5-3, 0.1-1)``, half ``MarkovSignal(1, 0.5-3)``), the noise set for an
-``S_x / S_n`` at the band's edge (``min(sqrt(2) u, 1)``) log-uniform in 1e2-1e6 and a peak
-within ``CHECKED_SNR``, and reports, per edge-SNR bin, the worst error of the grids of tiers
-1 and 3 (and 2 where its ``u`` bound admits the design) against the converged polar grid.
+Near the OTF's cutoff ``H`` falls as ``(1 - r)^{3/2}``; where the signal is still strong
+there (a flat spectrum: a power law with a wide knee, a short correlation length), ``S_e``
+turns from ``S_n / |H|^2`` to ``S_x`` within a distance of the cutoff that falls with
+``S_x / S_n``: on bands that reach the cutoff the radial interpolation of the OTF has to
+follow it, and where only rays near the diagonal reach it the fine angular rule. The tiers
+were calibrated with ``MarkovSignal`` spectra of correlation length 2-10
+(``calibrate_tiers_kink.md``), whose ``S_x / S_n`` at the band's edge stays low; session
+81's adversarial climb under power-law spectra (``default_climb.py --signal powerlaw``)
+found tier 1 2.6e-4 off at u = 0.9 with ``S_x / S_n`` of 3.8e5 at the cutoff, and led to
+``EDGE_TIER_SNR``. This script draws random Seidel designs of strength up to ``--strength``
+with u uniform in ``--u`` under flat spectra (half ``PowerLawSignal(1, 1.5-3, 0.1-1)``,
+half ``MarkovSignal(1, 0.5-3)``), the noise set for an ``S_x / S_n`` at the band's edge
+(``_merit._edge_snr``: at ``min(sqrt(2) u, 1)``) log-uniform in 1e2-1e6 and a peak within
+``CHECKED_SNR``, and reports, per edge-SNR bin and band reach, the worst error against the
+converged polar grid of the grid of each tier whose bounds admit the design (tiers 1-3 and
+the steep tier), of the default as routed and of ``"high"``.
 
 Usage (from the repository root; about 10 min on 2 cores)::
 
     .venv/bin/python benchmarks/edge_snr_tiers.py [--designs 150] [--seed 0] [--u 0.6 1.2]
-        [--name edge_snr_tiers]
+        [--strength 5] [--name edge_snr_tiers]
 
 Writes ``results/<name>.json`` and ``.md``.
 """
@@ -39,16 +41,12 @@ import _common as common  # noqa: E402 - turns on float64
 import numpy as np  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
+from jmse_jax._merit import _edge_snr  # noqa: E402
 
 TERMS = ("w020", "w040", "w131", "w222", "w220")
 BINS = (1e2, 1e3, 3e3, 1e4, 3e4, 1e5, 3e5, 1e6)
 TIERS = ("1", "2", "3", "4")
 COLUMNS = TIERS + ("default", "high")
-
-
-def _edge_snr(signal, noise, u):
-    nu = min(math.sqrt(2.0) * u, 1.0)
-    return float(signal.radial(nu)) / float(noise.variance)
 
 
 def main(argv=None):
@@ -74,7 +72,7 @@ def main(argv=None):
         else:
             signal = jj.MarkovSignal(1.0, float(rng.uniform(0.5, 3.0)))
         target = float(10 ** rng.uniform(2, 6))
-        noise = jj.WhiteNoise(float(signal.radial(min(math.sqrt(2.0) * u, 1.0))) / target)
+        noise = jj.WhiteNoise(float(_edge_snr(u, signal, jj.WhiteNoise(1.0))) / target)
         peak = float(signal.radial(0.0)) / float(noise.variance)
         design = (jj.Seidel(**coefficients), field, u, signal, noise)
         strength = float(jj.aberration_strength(*design[:3]))
