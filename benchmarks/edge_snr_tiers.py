@@ -14,7 +14,7 @@ with u uniform in ``--u`` under flat spectra (half ``PowerLawSignal(1, 1.5-3, 0.
 half ``MarkovSignal(1, 0.5-3)``), the noise set for an ``S_x / S_n`` at the band's edge
 (``_merit._edge_snr``: at ``min(sqrt(2) u, 1)``) log-uniform in 1e2-1e6 and a peak within
 ``CHECKED_SNR``, and reports, per edge-SNR bin and band reach, the worst error against the
-converged polar grid of the grid of each tier whose bounds admit the design (tiers 1-3 and
+converged polar grid of the grid of each tier whose bounds admit the design (tiers 0-3 and
 the steep tier), of the default as routed and of ``"high"``.
 
 Usage (from the repository root; about 10 min on 2 cores)::
@@ -45,7 +45,7 @@ from jmse_jax._merit import _edge_snr  # noqa: E402
 
 TERMS = ("w020", "w040", "w131", "w222", "w220")
 BINS = (1e2, 1e3, 3e3, 1e4, 3e4, 1e5, 3e5, 1e6)
-TIERS = ("1", "2", "3", "4")
+TIERS = ("0", "1", "2", "3", "4")
 COLUMNS = TIERS + ("default", "high")
 
 
@@ -104,9 +104,10 @@ def main(argv=None):
              "the design, alone; the default and `high` as a user calls them), by the band's "
              "reach: u <= 0.5 (corner within 0.707 of the cutoff), 0.5 < u <= 1/sqrt(2), and "
              "u > 1/sqrt(2) (rays reach the cutoff; tier 2 admits none).", "",
-             "| S_x / S_n at the band's edge | u | tier 1 (40 radial OTF nodes, 160 angular "
-             "fine) | tier 2 (64, 128) | tier 3 (96, 256) | steep tier (96, 512) | the default "
-             "as routed | `high` (80, 960) |", "|---|---|---|---|---|---|---|---|"]
+             "| S_x / S_n at the band's edge | u | tier 0 (24 radial OTF nodes, 96 angular "
+             "fine) | tier 1 (40, 160) | tier 2 (64, 128) | tier 3 (96, 256) | steep tier (96, "
+             "512) | the default as routed | `high` (80, 960) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     groups = (("<= 0.5", 0.0, 0.5), ("0.5 - 0.707", 0.5, jj.DEFAULT_TIERS[2][1]),
               ("> 0.707", jj.DEFAULT_TIERS[2][1], math.inf))
     for label, u_low, u_high in groups:

@@ -62,6 +62,7 @@ __all__ = [
     "CHECKED_CANCELLATION",
     "CHECKED_SLOPE",
     "CHECKED_STRENGTH",
+    "DEGREE_NODES",
     "DEGREE_OVERLAP",
     "DEGREE_STEEP_SLOPE",
     "HIGH_BALANCED_GRID",
@@ -457,15 +458,23 @@ HIGH_RAY_GRID = dict(nodes=(256, 48), se_nodes=(4800, 960), overlap_nodes=(128, 
 #: it bound by the grid's angular counts, 8.8e-6 with 64 angular OTF nodes); it costs about
 #: 0.7x the first of those (0.87 against 1.2 s a value, Noll 4-45, 2 cores).
 DEGREE_OVERLAP = dict(overlap_nodes=(128, 96), overlap_floor=96)
-#: The OTF nodes (radial, angular) of ``"high"``'s balanced plan in programs for designs of
-#: higher degree than Seidel's (with ``DEGREE_OVERLAP``): ``HIGH_BALANCED_GRID``'s 48
-#: angular nodes bind on such designs at small u. On the 175 random Zernike designs of
-#: ``benchmarks/zernike_high_routes.py`` (session 68), up to ``CHECKED_SLOPE``, its grid with
-#: ``DEGREE_OVERLAP`` was up to 2.3e-5 off (a Noll 4-22 design at u = 0.2, slope 55, whose
-#: two references differ by 1.1e-6), with these nodes 3.9e-6 (two more than 1e-6, where
-#: the references are not resolved), at about 1.3x the time (``HIGH_STEEP_GRID`` with
-#: ``DEGREE_OVERLAP``, about as costly, 4.3e-6).
-HIGH_DEGREE_NODES = (160, 64)
+#: The OTF nodes (radial, angular) of the balanced plan in programs for designs of higher
+#: degree than Seidel's (with ``DEGREE_OVERLAP``), in the default and ``"high"``: the
+#: balanced grids' 48 angular nodes bind on such designs. On the 175 random Zernike designs
+#: of ``benchmarks/zernike_high_routes.py`` (session 68), up to ``CHECKED_SLOPE``,
+#: ``"high"``'s grid with ``DEGREE_OVERLAP`` was up to 2.3e-5 off (a Noll 4-22 design at u =
+#: 0.2, slope 55, whose two references differ by 1.1e-6), with these nodes 3.9e-6 (two
+#: more than 1e-6, where the references are not resolved), at about 1.3x the time
+#: (``HIGH_STEEP_GRID`` with ``DEGREE_OVERLAP``, about as costly, 4.3e-6). The default kept
+#: 48 (its worst there 1.4e-5) until session 82, when an adversarial climb over Noll 4-22
+#: designs (``benchmarks/default_climb.py --family zernike``) found one with 0.57 and 0.27
+#: waves of quadrafoil (``Z14``, ``Z15``; strength 23, u = 0.29) 3.0e-4 off in it
+#: (``MarkovSignal(1, 5)`` at noise 2e-5: 6.4e-4); 56, 64 and 80 angular nodes leave 2.8e-5,
+#: 2.4e-7 and 1.5e-11. The OTF of an ``m``-fold term varies ``m`` times as fast with the
+#: frequency's angle as its strength says, and Seidel's shapes have ``m <= 2``.
+DEGREE_NODES = (160, 64)
+#: ``"high"``'s name for ``DEGREE_NODES`` (the two presets differed until session 82).
+HIGH_DEGREE_NODES = DEGREE_NODES
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
@@ -1716,8 +1725,8 @@ def jmse(
         design beyond Seidel's shapes (``beyond_seidel_degree``: a Zernike term of radial
         order 5 or more, or of angular order 3 or more) takes the steep tier, or if its
         terms cancel or it is steeper than ``DEGREE_STEEP_SLOPE`` the balanced plan with
-        the overlap rule ``DEGREE_OVERLAP`` (``"high"``: its balanced plan, with that rule
-        and the OTF nodes ``HIGH_DEGREE_NODES``). The two weakest
+        the overlap rule ``DEGREE_OVERLAP`` and the OTF nodes ``DEGREE_NODES``
+        (``"high"``: its balanced plan, likewise). The two weakest
         tiers first try a cheaper grid and keep its value when a coarse check grid
         (computed in float32, on other angular nodes) agrees with it to 1e-5 and its own
         interpolation-error estimate is below 1e-5
@@ -1914,8 +1923,8 @@ def _base_plans(static, aberrations=None):
     """The plans of ``static``: the tiers' (or the one fixed grid and, when the preset has
     one, its steep grid, ``HIGH_STEEP_GRID``), then the balanced grid when there is one
     (``BALANCED_GRID``, ``HIGH_BALANCED_GRID``), with the overlap rule ``DEGREE_OVERLAP``
-    (and in ``"high"`` the OTF nodes ``HIGH_DEGREE_NODES``) when ``aberrations`` can be of
-    higher degree than Seidel's (``_degree_program``)."""
+    and the OTF nodes ``DEGREE_NODES`` when ``aberrations`` can be of higher degree than
+    Seidel's (``_degree_program``)."""
     options, tiers, _, _, balanced, steep, _ = static.value
     if tiers is not None:
         plans = _tier_plans(options, tiers)
@@ -1925,8 +1934,7 @@ def _base_plans(static, aberrations=None):
         plans = ((options, None),)
     if balanced is not None:
         if _degree_program(aberrations):
-            nodes = HIGH_DEGREE_NODES if balanced == HIGH_BALANCED_GRID else balanced["nodes"]
-            balanced = {**balanced, **DEGREE_OVERLAP, "nodes": nodes}
+            balanced = {**balanced, **DEGREE_OVERLAP, "nodes": DEGREE_NODES}
         plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
     return plans
 
@@ -1958,8 +1966,8 @@ def _tier_of(static, aberrations, field, u, signal=None, noise=None, cancelling=
     trefoil) takes, from
     ``CANCELLING_STRENGTH``, the default's steep tier if it does not cancel and is no
     steeper than ``DEGREE_STEEP_SLOPE``, else the balanced tier (``"high"``: its balanced tier),
-    whose grid then has the overlap rule ``DEGREE_OVERLAP`` (in ``"high"`` the OTF nodes
-    ``HIGH_DEGREE_NODES`` too; ``_base_plans``). The tiers
+    whose grid then has the overlap rule ``DEGREE_OVERLAP`` and the OTF nodes
+    ``DEGREE_NODES`` (``_base_plans``). The tiers
     were calibrated on Seidel designs only; on random Zernike designs of Noll 4-22 to 4-45
     (``benchmarks/zernike_routes.py``, session 67) the tiers by strength were up to 5.0e-3
     off at slope 24, the steep tier's grid held those that do not cancel within 8.7e-6 up

@@ -896,8 +896,9 @@ def test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes():
     """``"high"``'s balanced plan, which a design beyond Seidel's degree takes from a
     strength of 2.5, has in a program for such designs the OTF nodes ``HIGH_DEGREE_NODES``
     with ``DEGREE_OVERLAP``; a random Noll 4-22 design at u = 0.2 takes it (its accuracy
-    there: the next test, slow). A Seidel program's balanced plan keeps
-    ``HIGH_BALANCED_GRID``'s nodes, and the default's ``BALANCED_GRID``'s."""
+    there: the next test, slow). So has the default's (``DEGREE_NODES``, since session 82).
+    A Seidel program's balanced plan keeps ``HIGH_BALANCED_GRID``'s nodes, and the
+    default's ``BALANCED_GRID``'s."""
     from jmse_jax import _merit
 
     ab = HIGH_BALANCED_ZERNIKE
@@ -910,7 +911,30 @@ def test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes():
     assert balanced["overlap_nodes"] == jj.DEGREE_OVERLAP["overlap_nodes"]
     assert (_base_plans(jj.Seidel(w020=1.0), 0.2, "high")[-1][0]["nodes"]
             == jj.HIGH_BALANCED_GRID["nodes"])
-    assert _base_plans(ab, 0.2)[-1][0]["nodes"] == jj.BALANCED_GRID["nodes"]
+    assert _base_plans(ab, 0.2)[-1][0]["nodes"] == jj.DEGREE_NODES == jj.HIGH_DEGREE_NODES
+    assert (_base_plans(jj.Seidel(w020=1.0), 0.2)[-1][0]["nodes"]
+            == jj.BALANCED_GRID["nodes"])
+
+
+def test_default_balanced_plan_beyond_seidel_degree_holds_quadrafoil():
+    """A Noll 4-22 design with 0.57 and 0.27 waves of quadrafoil (``Z14``, ``Z15``) among
+    its terms, at u = 0.29 (strength 23, slope 56: the balanced plan), found by session
+    82's adversarial climb (``benchmarks/default_climb.py --family zernike --signal
+    powerlaw``; here under ``MarkovSignal(1, 5)`` at noise 1e-4): the default within 1e-5 of
+    a finer polar grid (which a finer one still moves by 1.4e-8). With the balanced grid's
+    48 angular OTF nodes (``BALANCED_GRID`` with ``DEGREE_OVERLAP``, the default's plan
+    until then) it was 1.5e-4 off, silently; an ``m``-fold term's OTF turns ``m`` times as
+    fast with the frequency's angle as its strength says (``DEGREE_NODES``)."""
+    ab = jj.Zernike([-1.5204, 2.0959, -0.6439, 1.1089, -0.5506, -0.4938, 0.567, 0.2106, 0.2,
+                     0.032, -0.568, -0.271, -0.4047, 0.0569, -0.1766, 0.0198, 0.0923, 0.1268,
+                     -0.0508], noll=tuple(range(4, 23)))
+    design = (ab, 0.5, 0.29, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4))
+    reference = float(jj.jmse(*design, nodes=(128, 80), se_nodes=(6400, 768),
+                              overlap_nodes=(112, 112), overlap_floor=112))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        value = float(jj.jmse(*design))
+    assert value == pytest.approx(reference, rel=1e-5)
 
 
 # Slow: three Zernike programs of "high"'s size (about 45 s on the CI machine).
