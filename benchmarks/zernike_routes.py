@@ -72,6 +72,9 @@ EXTRA = dict(
     # Cheaper rules tried for DEGREE_OVERLAP, on the designs that take the balanced plan.
     degree_128x96=dict(jj.BALANCED_GRID, overlap_nodes=(128, 96), overlap_floor=128),
     degree_128x96_floor96=dict(jj.BALANCED_GRID, overlap_nodes=(128, 96), overlap_floor=96),
+    # Session 82: the plan after the adversarial climbs (DEGREE_NODES, DEGREE_OVERLAP).
+    degree_s82=dict(jj.BALANCED_GRID, nodes=(160, 96), overlap_nodes=(128, 128),
+                    overlap_floor=96),
 )
 
 

@@ -456,23 +456,35 @@ HIGH_RAY_GRID = dict(nodes=(256, 48), se_nodes=(4800, 960), overlap_nodes=(128, 
 #: ``CHECKED_SLOPE`` this rule, (128, 128) floor 128 and (128, 96) floor 128 all leave the
 #: same worst error (1.4e-5, a design whose references differ by 1.1e-6; session 68 found
 #: it bound by the grid's angular counts, 8.8e-6 with 64 angular OTF nodes); it costs about
-#: 0.7x the first of those (0.87 against 1.2 s a value, Noll 4-45, 2 cores).
-DEGREE_OVERLAP = dict(overlap_nodes=(128, 96), overlap_floor=96)
+#: 0.7x the first of those (0.87 against 1.2 s a value, Noll 4-45, 2 cores). Since session
+#: 82 the order along the chords is 128 again (``DEGREE_NODES`` has the story): a climb
+#: found a Noll 4-22 design at slope 63 1.5e-4 off with (128, 96), floor 96 or 128, and
+#: 4.9e-7 with (128, 128) at either floor ((112, 112) floor 112: 4.5e-7; (160, 128): 4.9e-7).
+DEGREE_OVERLAP = dict(overlap_nodes=(128, 128), overlap_floor=96)
 #: The OTF nodes (radial, angular) of the balanced plan in programs for designs of higher
 #: degree than Seidel's (with ``DEGREE_OVERLAP``), in the default and ``"high"``: the
 #: balanced grids' 48 angular nodes bind on such designs. On the 175 random Zernike designs
 #: of ``benchmarks/zernike_high_routes.py`` (session 68), up to ``CHECKED_SLOPE``,
 #: ``"high"``'s grid with ``DEGREE_OVERLAP`` was up to 2.3e-5 off (a Noll 4-22 design at u =
-#: 0.2, slope 55, whose two references differ by 1.1e-6), with these nodes 3.9e-6 (two
-#: more than 1e-6, where the references are not resolved), at about 1.3x the time
-#: (``HIGH_STEEP_GRID`` with ``DEGREE_OVERLAP``, about as costly, 4.3e-6). The default kept
-#: 48 (its worst there 1.4e-5) until session 82, when an adversarial climb over Noll 4-22
-#: designs (``benchmarks/default_climb.py --family zernike``) found one with 0.57 and 0.27
-#: waves of quadrafoil (``Z14``, ``Z15``; strength 23, u = 0.29) 3.0e-4 off in it
-#: (``MarkovSignal(1, 5)`` at noise 2e-5: 6.4e-4); 56, 64 and 80 angular nodes leave 2.8e-5,
-#: 2.4e-7 and 1.5e-11. The OTF of an ``m``-fold term varies ``m`` times as fast with the
-#: frequency's angle as its strength says, and Seidel's shapes have ``m <= 2``.
-DEGREE_NODES = (160, 64)
+#: 0.2, slope 55, whose two references differ by 1.1e-6), with 64 angular nodes 3.9e-6
+#: (two more than 1e-6, where the references are not resolved), at about 1.3x the time
+#: (``HIGH_STEEP_GRID`` with ``DEGREE_OVERLAP``, about as costly, 4.3e-6); the default kept
+#: 48 (its worst there 1.4e-5). Session 82's adversarial climbs over Noll 4-22 designs under
+#: power-law spectra (``benchmarks/default_climb.py --family zernike --signal powerlaw``)
+#: found the plan short on random designs' tails: one with 0.57 and 0.27 waves of
+#: quadrafoil (``Z14``, ``Z15``; strength 23, u = 0.29, slope 56) 3.0e-4 off with 48
+#: angular nodes (56, 64, 80: 2.8e-5, 2.4e-7, 1.5e-11; ``MarkovSignal(1, 5)`` at noise
+#: 1e-4: 1.5e-4 with 48); once it had 64, one with 2.2 waves of astigmatism and quadrafoil
+#: (u = 0.29, slope 60) 7.4e-3 off (80: 2.5e-5, 96: 8.3e-7), and one at slope 63 short of
+#: the overlap rule (above). Seidel's shapes, on which the balanced grid's counts were set,
+#: have angular order at most 2; terms of higher order make the OTF turn faster with the
+#: frequency's angle at a given strength. With these nodes and ``DEGREE_OVERLAP`` the three
+#: designs are within 1e-6, and the 72 stored designs of ``zernike_routes.py`` that take the
+#: plan within the checked slope within 1.1e-6 (were 1.4e-5). Cost: such a design about
+#: 2.4x its time before session 82 (4.3 s a value, one core), and the Zernike value
+#: program's scratch 29.8 -> 44.7 MB, past the size at which XLA remaps it on every call
+#: (``_tier_plans``): a weak Zernike design's jitted value 4 -> 7 ms (``ab_zernike.py``).
+DEGREE_NODES = (160, 96)
 #: ``"high"``'s name for ``DEGREE_NODES`` (the two presets differed until session 82).
 HIGH_DEGREE_NODES = DEGREE_NODES
 

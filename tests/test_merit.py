@@ -937,6 +937,38 @@ def test_default_balanced_plan_beyond_seidel_degree_holds_quadrafoil():
     assert value == pytest.approx(reference, rel=1e-5)
 
 
+#: Two Noll 4-22 designs found by session 82's climb (seed 1) once the balanced plan had 64
+#: angular OTF nodes: ``(coefficients, u, PowerLawSignal arguments, noise)``.
+DEGREE_PLAN_DESIGNS = {
+    # 2.2 waves of astigmatism with quadrafoil, slope 60: 7.4e-3 off with 64 angular nodes.
+    "angular": ([-0.384, -0.4829, -2.2269, -0.7092, -0.2339, 0.0405, -0.0622, -0.2363, -0.5116,
+                 0.539, -0.2732, 0.5155, 0.2771, 0.0789, -0.0713, -0.1221, -0.1881, -0.0011,
+                 0.0571], 0.2894, (0.4828, 2.5737, 0.136), 8.35e-5),
+    # Slope 63: 1.5e-4 off with the overlap rule (128, 96).
+    "overlap": ([0.2486, -0.2289, 0.1295, 0.067, 0.1474, -1.2083, 0.2086, -0.3186, -0.4686,
+                 -0.1969, 0.6252, 0.5687, 0.1296, 0.2469, -0.1843, -0.4505, -0.7045, -0.1359,
+                 0.0076], 0.2403, (0.42, 2.2009, 0.0814), 1.44e-4),
+}
+
+
+@pytest.mark.parametrize("name", sorted(DEGREE_PLAN_DESIGNS))
+def test_default_balanced_plan_beyond_seidel_degree_holds_the_climbed_designs(name):
+    """The default within 1e-5 of a finer polar grid on two designs that session 82's climb
+    found in the balanced plan of Zernike programs (``default_climb.py --family zernike
+    --signal powerlaw --seed 1``): with ``DEGREE_NODES`` = (160, 64) one was 7.4e-3 off for
+    want of angular OTF nodes (96: 8.3e-7), with ``DEGREE_OVERLAP`` = (128, 96) the other
+    1.5e-4 for want of order along the overlap chords (128: 4.9e-7)."""
+    coefficients, u, spectrum, noise = DEGREE_PLAN_DESIGNS[name]
+    design = (jj.Zernike(coefficients, noll=tuple(range(4, 23))), 0.5, u,
+              jj.PowerLawSignal(*spectrum), jj.WhiteNoise(noise))
+    reference = float(jj.jmse(*design, nodes=(160, 128), se_nodes=(6400, 768),
+                              overlap_nodes=(160, 160), overlap_floor=128, peaks=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        value = float(jj.jmse(*design))
+    assert value == pytest.approx(reference, rel=1e-5)
+
+
 # Slow: three Zernike programs of "high"'s size (about 45 s on the CI machine).
 @pytest.mark.slow
 def test_high_balanced_plan_beyond_seidel_degree_is_accurate():
