@@ -921,10 +921,10 @@ def test_default_balanced_plan_beyond_seidel_degree_holds_quadrafoil():
     its terms, at u = 0.29 (strength 23, slope 56: the balanced plan), found by session
     82's adversarial climb (``benchmarks/default_climb.py --family zernike --signal
     powerlaw``; here under ``MarkovSignal(1, 5)`` at noise 1e-4): the default within 1e-5 of
-    a finer polar grid (which a finer one still moves by 1.4e-8). With the balanced grid's
-    48 angular OTF nodes (``BALANCED_GRID`` with ``DEGREE_OVERLAP``, the default's plan
-    until then) it was 1.5e-4 off, silently; an ``m``-fold term's OTF turns ``m`` times as
-    fast with the frequency's angle as its strength says (``DEGREE_NODES``)."""
+    a polar grid of other counts (which a finer one, (192, 96) / (8000, 1024) / (128, 128)
+    with peaks, moves by 1.4e-8). With the balanced grid's 48 angular OTF nodes (the
+    default's plan until then) it was 1.5e-4 off, silently; Seidel's shapes, on which those
+    counts were set, have no term of angular order above 2 (``DEGREE_NODES``)."""
     ab = jj.Zernike([-1.5204, 2.0959, -0.6439, 1.1089, -0.5506, -0.4938, 0.567, 0.2106, 0.2,
                      0.032, -0.568, -0.271, -0.4047, 0.0569, -0.1766, 0.0198, 0.0923, 0.1268,
                      -0.0508], noll=tuple(range(4, 23)))
