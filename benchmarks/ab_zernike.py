@@ -32,6 +32,9 @@ jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ab_compare import _load  # noqa: E402
 
+import jmse_jax as jj  # noqa: E402
+from jmse_jax._merit import _route  # noqa: E402
+
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -72,9 +75,6 @@ def main(argv=None):
                 start = time.perf_counter()
                 jax.block_until_ready(fn(*operands))
                 best[key] = min(best[key], time.perf_counter() - start)
-    import jmse_jax as jj
-    from jmse_jax._merit import _route
-
     print(f"Zernike Noll {noll[0]}-{noll[-1]}, preset {args.preset!r}: fastest of "
           f"{args.rounds} x {args.calls} calls per version")
     for d, design in enumerate(args.design):

@@ -1072,15 +1072,18 @@ def _ring_snr(strength, u, signal, noise):
     vanish, ``_RING_FRACTION u / strength`` from the origin (at most the band's corner,
     ``sqrt(2) u``), along the ``nu_x`` axis (the package's spectra are isotropic);
     traceable."""
-    nu = jnp.minimum(_RING_FRACTION * u / jnp.maximum(strength, 1e-30), jnp.sqrt(2.0) * u)
-    zero = jnp.zeros_like(nu)
-    return signal(nu, zero) / noise(nu, zero)
+    return _snr_at(jnp.minimum(_RING_FRACTION * u / jnp.maximum(strength, 1e-30),
+                               jnp.sqrt(2.0) * u), signal, noise)
 
 
 def _edge_snr(u, signal, noise):
     """``S_x / S_n`` at the band's edge, ``min(sqrt(2) u, 1)`` from the origin (along the
     ``nu_x`` axis; the package's spectra are isotropic); traceable."""
-    nu = jnp.minimum(jnp.sqrt(2.0) * u, 1.0)
+    return _snr_at(jnp.minimum(jnp.sqrt(2.0) * u, 1.0), signal, noise)
+
+
+def _snr_at(nu, signal, noise):
+    """``S_x / S_n`` at ``(nu, 0)``."""
     zero = jnp.zeros_like(nu)
     return signal(nu, zero) / noise(nu, zero)
 
