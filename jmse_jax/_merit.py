@@ -814,11 +814,16 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(
     # ones with a transposed operand, went to XLA's own dot at 3-6x the time. An earlier
     # attempt at real radial products (a concatenated layout that XLA's threaded GEMM took)
     # summed in an order that depended on the program and broke the bit-for-bit equality of
-    # sweeps across device counts; these pass it (``tests/test_sweep.py``).
+    # sweeps across device counts; these pass it (``tests/test_sweep.py``). The coarse OTF
+    # goes to the layout below before the product (coarse-sized, about 1 MB), so that the
+    # product writes the fine-sized result in place: two products, stacked and transposed
+    # after, held three fine-sized copies at once (44.7 MB of scratch in the Zernike value
+    # program, past the ~32 MB at which every call pays page faults; now 18.3 MB).
     l_r_t = jnp.asarray(np.ascontiguousarray(l_r.T), dtype)
-    h = jnp.stack([jnp.matmul(jnp.real(h_coarse), l_r_t, precision=EXACT),
-                   jnp.matmul(jnp.imag(h_coarse), l_r_t, precision=EXACT)])
-    h = jnp.transpose(h, (2, 0, 1, 3))  # (coarse rows, re/im, triangles, n_r), see above
+    parts = jnp.stack([jnp.real(h_coarse), jnp.imag(h_coarse)])  # (re/im, tri, rows, c_r)
+    parts = jnp.transpose(parts, (2, 0, 1, 3))  # (coarse rows, re/im, triangles, c_r)
+    h = jnp.matmul(parts.reshape(-1, parts.shape[-1]), l_r_t,
+                   precision=EXACT).reshape(*parts.shape[:3], n_r)
     # The blocks run one after another in a loop, so the program holds one block, not one
     # copy per block: an unrolled version took 21 s to trace and compile the default's
     # value_and_grad against 13 s, at the same run time (benchmarks/README.md). Padded rows
@@ -844,7 +849,10 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(
             back = back + block_back
         return (total + part, back), None
 
-    carry = (jnp.zeros((), dtype), jnp.zeros(h.shape if adjoint else (), h.dtype))
+    # The adjoint's zeros made from this ``h`` (``_after``): one shared zero array, formed
+    # before the first of two quadrants' loops, stayed live through both (2 x 15 MB).
+    carry = (jnp.zeros((), dtype),
+             _after(jnp.zeros(h.shape, h.dtype), h) if adjoint else jnp.zeros((), h.dtype))
     rows = tuple(jnp.asarray(a, dtype) for a in rows)
     if n_blocks == 1:
         (total, back), _ = block(carry, tuple(a[0] for a in rows))
@@ -883,6 +891,17 @@ def _instantiate(tangent):
     return jax.tree_util.tree_map(
         lambda t: jnp.zeros(t.shape, t.dtype) if isinstance(t, SymbolicZero) else t,
         tangent, is_leaf=lambda x: isinstance(x, SymbolicZero))
+
+
+def _after(x, done):
+    """``x`` unchanged, but computed after ``done`` (an array) in XLA's schedule.
+
+    A data dependency orders the two: XLA's CPU pipeline drops optimisation barriers before
+    it schedules, and it does not fold ``y * 0`` in floating point. Only ``done``'s first
+    element is read (its finite part, so that ``x`` never turns into NaN), without a
+    gradient."""
+    first = jax.lax.stop_gradient(jnp.real(jnp.ravel(done)[0]))
+    return x * (1.0 + 0.0 * jnp.where(jnp.isfinite(first), first, 0.0)).astype(x.dtype)
 
 
 def _fine_stage_jvp(coarse, fine, dtype, ridges, primals, tangents):
@@ -938,6 +957,12 @@ def _band_integrals(aberrations, field, u, signal, noise, options, dtype, mirror
             out.append(jnp.sum(coarse.weights * s_e) + jnp.sum(coarse.outer_weights * s_x_out))
             continue
         ridges = bool(options.get("peaks", False))
+        if out:
+            # The quadrants' fine stages one after the other: XLA's scheduler otherwise
+            # forms both radially interpolated OTFs (15 MB each on the balanced grid) before
+            # either loop, and scratch above about 32 MB costs every call of the program
+            # its page faults (``_fine_blocks``).
+            h = _after(h, out[-1][0] if estimate else out[-1])
         total = _fine_stage(h, u, signal, noise, options["nodes"], options["se_nodes"], dtype,
                             ridges)
         if estimate:
