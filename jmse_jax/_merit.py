@@ -64,6 +64,7 @@ __all__ = [
     "CHECKED_STRENGTH",
     "DEGREE_NODES",
     "DEGREE_OVERLAP",
+    "DEGREE_SE_NODES",
     "DEGREE_STEEP_SLOPE",
     "HIGH_BALANCED_GRID",
     "HIGH_DEGREE_NODES",
@@ -481,12 +482,24 @@ DEGREE_OVERLAP = dict(overlap_nodes=(128, 128), overlap_floor=96)
 #: frequency's angle at a given strength. With these nodes and ``DEGREE_OVERLAP`` the three
 #: designs are within 1e-6, and the 72 stored designs of ``zernike_routes.py`` that take the
 #: plan within the checked slope within 1.1e-6 (were 1.4e-5). Cost: such a design about
-#: 2.4x its time before session 82 (4.3 s a value, one core), and the Zernike value
-#: program's scratch 29.8 -> 44.7 MB, past the size at which XLA remaps it on every call
-#: (``_tier_plans``): a weak Zernike design's jitted value 4 -> 7 ms (``ab_zernike.py``).
+#: 2.4x its time before session 82 (4.3 s a value, one core); the Zernike value program's
+#: scratch went 29.8 -> 44.7 MB, past the size at which XLA remaps it on every call
+#: (``_tier_plans``), until session 83 took the fine stage's copies out (18.3 MB).
 DEGREE_NODES = (160, 96)
 #: ``"high"``'s name for ``DEGREE_NODES`` (the two presets differed until session 82).
 HIGH_DEGREE_NODES = DEGREE_NODES
+#: The fine S_e nodes (radial, angular) of the balanced plan in programs for designs of
+#: higher degree than Seidel's, in the default and ``"high"`` (whose balanced grid,
+#: ``HIGH_BALANCED_GRID``, has them already). Under flat spectra S_e stays large out to
+#: the cutoff, where such designs' OTFs turn fast with the frequency's angle: a climb from
+#: the quadrafoil design of session 82 (``default_climb.py --family zernike --signal
+#: powerlaw --start``) reached a Noll 4-22 design at u = 0.118, strength 9.1, peak S_x / S_n
+#: at the band's edge 9.3e4, that ``BALANCED_GRID``'s 512 angular fine nodes left 4.5e-5 off
+#: (768: 1.4e-5, 1024: 1.5e-6, 960: 2.2e-7 from a reference finer in every count, which is
+#: the reference's own difference from the next; 6400 radial nodes with 512: no change).
+#: About 4% of such a design's time (the overlap OTF dominates; one core, value 4.30 ->
+#: 4.47 s, value_and_grad 10.2 -> 10.6 s at 1024). Session 83.
+DEGREE_SE_NODES = (4800, 960)
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
@@ -1765,8 +1778,8 @@ def jmse(
         design beyond Seidel's shapes (``beyond_seidel_degree``: a Zernike term of radial
         order 5 or more, or of angular order 3 or more) takes the steep tier, or if its
         terms cancel or it is steeper than ``DEGREE_STEEP_SLOPE`` the balanced plan with
-        the overlap rule ``DEGREE_OVERLAP`` and the OTF nodes ``DEGREE_NODES``
-        (``"high"``: its balanced plan, likewise). The two weakest
+        the overlap rule ``DEGREE_OVERLAP``, the OTF nodes ``DEGREE_NODES`` and the fine
+        S_e nodes ``DEGREE_SE_NODES`` (``"high"``: its balanced plan, likewise). The two weakest
         tiers first try a cheaper grid and keep its value when a coarse check grid
         (computed in float32, on other angular nodes) agrees with it to 1e-5 and its own
         interpolation-error estimate is below 1e-5
@@ -1962,9 +1975,9 @@ def _route(aberrations, field, u, signal, noise, **options):
 def _base_plans(static, aberrations=None):
     """The plans of ``static``: the tiers' (or the one fixed grid and, when the preset has
     one, its steep grid, ``HIGH_STEEP_GRID``), then the balanced grid when there is one
-    (``BALANCED_GRID``, ``HIGH_BALANCED_GRID``), with the overlap rule ``DEGREE_OVERLAP``
-    and the OTF nodes ``DEGREE_NODES`` when ``aberrations`` can be of higher degree than
-    Seidel's (``_degree_program``)."""
+    (``BALANCED_GRID``, ``HIGH_BALANCED_GRID``), with the overlap rule ``DEGREE_OVERLAP``,
+    the OTF nodes ``DEGREE_NODES`` and the fine S_e nodes ``DEGREE_SE_NODES`` when
+    ``aberrations`` can be of higher degree than Seidel's (``_degree_program``)."""
     options, tiers, _, _, balanced, steep, _ = static.value
     if tiers is not None:
         plans = _tier_plans(options, tiers)
@@ -1974,7 +1987,8 @@ def _base_plans(static, aberrations=None):
         plans = ((options, None),)
     if balanced is not None:
         if _degree_program(aberrations):
-            balanced = {**balanced, **DEGREE_OVERLAP, "nodes": DEGREE_NODES}
+            balanced = {**balanced, **DEGREE_OVERLAP, "nodes": DEGREE_NODES,
+                        "se_nodes": DEGREE_SE_NODES}
         plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
     return plans
 
@@ -2006,8 +2020,8 @@ def _tier_of(static, aberrations, field, u, signal=None, noise=None, cancelling=
     trefoil) takes, from
     ``CANCELLING_STRENGTH``, the default's steep tier if it does not cancel and is no
     steeper than ``DEGREE_STEEP_SLOPE``, else the balanced tier (``"high"``: its balanced tier),
-    whose grid then has the overlap rule ``DEGREE_OVERLAP`` and the OTF nodes
-    ``DEGREE_NODES`` (``_base_plans``). The tiers
+    whose grid then has the overlap rule ``DEGREE_OVERLAP``, the OTF nodes
+    ``DEGREE_NODES`` and the fine S_e nodes ``DEGREE_SE_NODES`` (``_base_plans``). The tiers
     were calibrated on Seidel designs only; on random Zernike designs of Noll 4-22 to 4-45
     (``benchmarks/zernike_routes.py``, session 67) the tiers by strength were up to 5.0e-3
     off at slope 24, the steep tier's grid held those that do not cancel within 8.7e-6 up

@@ -896,9 +896,10 @@ def test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes():
     """``"high"``'s balanced plan, which a design beyond Seidel's degree takes from a
     strength of 2.5, has in a program for such designs the OTF nodes ``HIGH_DEGREE_NODES``
     with ``DEGREE_OVERLAP``; a random Noll 4-22 design at u = 0.2 takes it (its accuracy
-    there: the next test, slow). So has the default's (``DEGREE_NODES``, since session 82).
-    A Seidel program's balanced plan keeps ``HIGH_BALANCED_GRID``'s nodes, and the
-    default's ``BALANCED_GRID``'s."""
+    there: the next test, slow). So has the default's (``DEGREE_NODES``, since session 82),
+    and both have the fine S_e nodes ``DEGREE_SE_NODES`` (``"high"``'s own). A Seidel
+    program's balanced plan keeps ``HIGH_BALANCED_GRID``'s nodes, and the default's
+    ``BALANCED_GRID``'s."""
     from jmse_jax import _merit
 
     ab = HIGH_BALANCED_ZERNIKE
@@ -912,6 +913,10 @@ def test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes():
     assert (_base_plans(jj.Seidel(w020=1.0), 0.2, "high")[-1][0]["nodes"]
             == jj.HIGH_BALANCED_GRID["nodes"])
     assert _base_plans(ab, 0.2)[-1][0]["nodes"] == jj.DEGREE_NODES == jj.HIGH_DEGREE_NODES
+    assert (_base_plans(ab, 0.2)[-1][0]["se_nodes"] == balanced["se_nodes"]
+            == jj.DEGREE_SE_NODES == jj.HIGH_BALANCED_GRID["se_nodes"])
+    assert (_base_plans(jj.Seidel(w020=1.0), 0.2)[-1][0]["se_nodes"]
+            == jj.BALANCED_GRID["se_nodes"])
     assert (_base_plans(jj.Seidel(w020=1.0), 0.2)[-1][0]["nodes"]
             == jj.BALANCED_GRID["nodes"])
 
@@ -937,31 +942,37 @@ def test_default_balanced_plan_beyond_seidel_degree_holds_quadrafoil():
     assert value == pytest.approx(reference, rel=1e-5)
 
 
-#: Two Noll 4-22 designs found by session 82's climb (seed 1) once the balanced plan had 64
-#: angular OTF nodes: ``(coefficients, u, PowerLawSignal arguments, noise)``.
+#: Noll 4-22 designs found by session 82's climbs in the balanced plan of Zernike programs:
+#: ``(coefficients, field, u, PowerLawSignal arguments, noise)``.
 DEGREE_PLAN_DESIGNS = {
     # 2.2 waves of astigmatism with quadrafoil, slope 60: 7.4e-3 off with 64 angular nodes.
     "angular": ([-0.384, -0.4829, -2.2269, -0.7092, -0.2339, 0.0405, -0.0622, -0.2363, -0.5116,
                  0.539, -0.2732, 0.5155, 0.2771, 0.0789, -0.0713, -0.1221, -0.1881, -0.0011,
-                 0.0571], 0.2894, (0.4828, 2.5737, 0.136), 8.35e-5),
+                 0.0571], 0.5, 0.2894, (0.4828, 2.5737, 0.136), 8.35e-5),
     # Slope 63: 1.5e-4 off with the overlap rule (128, 96).
     "overlap": ([0.2486, -0.2289, 0.1295, 0.067, 0.1474, -1.2083, 0.2086, -0.3186, -0.4686,
                  -0.1969, 0.6252, 0.5687, 0.1296, 0.2469, -0.1843, -0.4505, -0.7045, -0.1359,
-                 0.0076], 0.2403, (0.42, 2.2009, 0.0814), 1.44e-4),
+                 0.0076], 0.5, 0.2403, (0.42, 2.2009, 0.0814), 1.44e-4),
+    # A nearly flat spectrum to the band's edge (S_x / S_n 9.3e4 there), u = 0.118: 4.5e-5
+    # off with the balanced grid's 512 angular fine S_e nodes (``DEGREE_SE_NODES``).
+    "fine": ([-1.1974, 1.6306, -0.4779, 1.0228, -0.4399, -0.6531, 0.6589, 0.4831, 0.0976,
+              -0.3829, -0.3547, 0.0302, -0.5785, -0.221, -0.2038, -0.0334, -0.0938, 0.1216,
+              0.0851], 0.6386, 0.1179, (0.0026, 2.0347, 0.0437), 1e-6),
 }
 
 
 @pytest.mark.parametrize("name", sorted(DEGREE_PLAN_DESIGNS))
 def test_default_balanced_plan_beyond_seidel_degree_holds_the_climbed_designs(name):
-    """The default within 1e-5 of a finer polar grid on two designs that session 82's climb
-    found in the balanced plan of Zernike programs (``default_climb.py --family zernike
-    --signal powerlaw --seed 1``): with ``DEGREE_NODES`` = (160, 64) one was 7.4e-3 off for
-    want of angular OTF nodes (96: 8.3e-7), with ``DEGREE_OVERLAP`` = (128, 96) the other
-    1.5e-4 for want of order along the overlap chords (128: 4.9e-7)."""
-    coefficients, u, spectrum, noise = DEGREE_PLAN_DESIGNS[name]
-    design = (jj.Zernike(coefficients, noll=tuple(range(4, 23))), 0.5, u,
+    """The default within 1e-5 of a finer polar grid on three designs that session 82's
+    climbs found in the balanced plan of Zernike programs (``default_climb.py --family
+    zernike --signal powerlaw``): with ``DEGREE_NODES`` = (160, 64) one was 7.4e-3 off for
+    want of angular OTF nodes (96: 8.3e-7), with ``DEGREE_OVERLAP`` = (128, 96) another
+    1.5e-4 for want of order along the overlap chords (128: 4.9e-7), and with 512 angular
+    fine S_e nodes the third 4.5e-5 (``DEGREE_SE_NODES``, 960: 2.2e-7)."""
+    coefficients, field, u, spectrum, noise = DEGREE_PLAN_DESIGNS[name]
+    design = (jj.Zernike(coefficients, noll=tuple(range(4, 23))), field, u,
               jj.PowerLawSignal(*spectrum), jj.WhiteNoise(noise))
-    reference = float(jj.jmse(*design, nodes=(160, 128), se_nodes=(6400, 768),
+    reference = float(jj.jmse(*design, nodes=(160, 128), se_nodes=(6400, 1280),
                               overlap_nodes=(160, 160), overlap_floor=128, peaks=True))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
