@@ -34,7 +34,8 @@ under ``PowerLawSignal(amplitude, exponent, knee)`` instead of ``MarkovSignal(1,
 exponent and factors of e^0.3 and e^0.5 in the knee and amplitude). Either adds to the
 results' name (``default_climb_zernike``, ``default_climb_powerlaw``,
 ``default_climb_high_zernike``...). Zernike designs are measured against references finer
-than their balanced plan (``ZERNIKE_REFERENCE``, ``ZERNIKE_FINER``).
+than their balanced plan (``ZERNIKE_REFERENCE``, ``ZERNIKE_FINER``), and ``--preset high``
+against references with more fine S_e nodes than ``"high"``'s grids (since session 83).
 
 Writes ``results/default_climb.json`` and ``.md`` (``--preset high``: ``default_climb_high``;
 ``--start``: ``default_climb_given`` and ``--tag``).
@@ -68,8 +69,12 @@ FINER = dict(nodes=(200, 80), se_nodes=(8000, 1200), overlap_nodes=(160, 160),
 #: (128, 128) since session 82 (``DEGREE_NODES``, ``DEGREE_OVERLAP``), more than
 #: ``REFERENCE``'s 64 and as many as its rule; finer in both. (Session 82's seed-1 search ran
 #: against (160, 80) and (200, 96), when the plan had 64.)
-ZERNIKE_REFERENCE = dict(REFERENCE, nodes=(160, 128), overlap_nodes=(160, 160), overlap_floor=160)
-ZERNIKE_FINER = dict(FINER, nodes=(200, 160), overlap_nodes=(192, 192), overlap_floor=192)
+#: Since session 83 the plan has 960 angular fine S_e nodes (``DEGREE_SE_NODES``), as many
+#: as ``REFERENCE``: the references have more.
+ZERNIKE_REFERENCE = dict(REFERENCE, nodes=(160, 128), se_nodes=(6400, 1280),
+                         overlap_nodes=(160, 160), overlap_floor=160)
+ZERNIKE_FINER = dict(FINER, nodes=(200, 160), se_nodes=(8000, 1600), overlap_nodes=(192, 192),
+                     overlap_floor=192)
 
 
 def _aberrations(row):
@@ -198,6 +203,10 @@ def main(argv=None):
     rng = np.random.default_rng(args.seed)
     reference_grid, finer_grid = ((ZERNIKE_REFERENCE, ZERNIKE_FINER) if args.family == "zernike"
                                   else (REFERENCE, FINER))
+    if args.preset == "high":
+        # "high"'s grids have up to (6400, 960) fine S_e nodes, as many as REFERENCE.
+        reference_grid = dict(reference_grid, se_nodes=(8000, 1280))
+        finer_grid = dict(finer_grid, se_nodes=(9600, 1600))
     start = time.perf_counter()
     sample = []
     for i in range(args.designs):
