@@ -497,8 +497,9 @@ HIGH_DEGREE_NODES = DEGREE_NODES
 #: at the band's edge 9.3e4, that ``BALANCED_GRID``'s 512 angular fine nodes left 4.5e-5 off
 #: (768: 1.4e-5, 1024: 1.5e-6, 960: 2.2e-7 from a reference finer in every count, which is
 #: the reference's own difference from the next; 6400 radial nodes with 512: no change).
-#: About 4% of such a design's time (the overlap OTF dominates; one core, value 4.30 ->
-#: 4.47 s, value_and_grad 10.2 -> 10.6 s at 1024). Session 83.
+#: A few % of such a design's time (the overlap OTF dominates; one core, the plan's grid
+#: alone at 1024: value 4.30 -> 4.47 s, value_and_grad 10.2 -> 10.6 s; the default's Zernike
+#: program with 960: 4.24 -> 4.37 s and 14.0 -> 14.7 s, ``ab_zernike.py``). Session 83.
 DEGREE_SE_NODES = (4800, 960)
 
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
@@ -831,7 +832,7 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(
     # goes to the layout below before the product (coarse-sized, about 1 MB), so that the
     # product writes the fine-sized result in place: two products, stacked and transposed
     # after, held three fine-sized copies at once (44.7 MB of scratch in the Zernike value
-    # program, past the ~32 MB at which every call pays page faults; now 18.3 MB).
+    # program, past the ~32 MB at which every call pays page faults; now about 18 MB).
     l_r_t = jnp.asarray(np.ascontiguousarray(l_r.T), dtype)
     parts = jnp.stack([jnp.real(h_coarse), jnp.imag(h_coarse)])  # (re/im, tri, rows, c_r)
     parts = jnp.transpose(parts, (2, 0, 1, 3))  # (coarse rows, re/im, triangles, c_r)

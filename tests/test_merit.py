@@ -1146,3 +1146,23 @@ def test_traced_band_past_u_max_is_inf_in_the_baseline(fig1):
     value, _ = value_and_grad(1.5)
     assert float(value) == pytest.approx(float(jj.baseline_jmse(ab, field, 1.5, signal, noise,
                                                                  B=16)), rel=1e-12)
+
+
+@pytest.mark.parametrize("done", [2.5, 0.0, math.inf, -math.inf, math.nan])
+def test_after_leaves_its_value_and_gradient_unchanged(done):
+    """``_after(x, done)``, which orders the quadrants' fine stages, returns ``x`` bit for
+    bit whatever ``done`` holds (infinite or NaN included), passes ``x``'s gradient through
+    unchanged and gives ``done`` none."""
+    from jmse_jax._merit import _after
+
+    x = jnp.asarray([1.0 + 2.0j, -3.5e-300 + 0.0j, 7.25e200 - 1.0j])
+    done = jnp.asarray([done, 1.0])
+    assert np.array_equal(np.asarray(_after(x, done)), np.asarray(x))
+
+    def loss(x_re, done):
+        return jnp.sum(_after(x_re, done) ** 2)
+
+    x_re = jnp.real(x)[:1] * 0.5
+    d_x, d_done = jax.grad(loss, argnums=(0, 1))(x_re, done)
+    assert np.array_equal(np.asarray(d_x), np.asarray(2.0 * x_re))
+    assert np.array_equal(np.asarray(d_done), np.zeros(2))
