@@ -15,8 +15,9 @@ random such designs, each candidate route's grid against a converged polar grid:
   overlap rule ``DEGREE_OVERLAP``, the balanced plan of a program for such designs since
   session 67 (the balanced grid's own rule was found 3.1e-3 off at slope 46).
 
-The report's ``now`` is the route taken since session 67: the steep tier's grid for a
-design that does not cancel and is no steeper than ``STEEP_SLOPE``, else the balanced plan.
+The report's ``now`` is the route taken now: the steep tier's grid for a design that does
+not cancel and is no steeper than ``DEGREE_STEEP_SLOPE`` (``STEEP_SLOPE`` until session 79),
+else the balanced plan (``NOW``).
 
 Designs: the 40 stored ones of ``zernike_designs.py`` (with their references) and new ones,
 drawn in three families: coefficients of Noll 4-22 or 4-37 normal with deviation ``1/n``
@@ -64,8 +65,11 @@ FIELD = 0.5  # a Zernike design ignores the field
 REFERENCE = dict(nodes=(224, 112), se_nodes=(9600, 768), overlap_nodes=(192, 192),
                  overlap_floor=192, peaks=True)
 ROUTES = ("tier", "next", "steep", "balanced")
-#: The candidate below that became ``DEGREE_OVERLAP`` (``BALANCED_GRID`` with it).
-NOW = "degree_128x96_floor96"
+#: The candidate below that is the balanced plan of a program for such designs: since session
+#: 82 ``BALANCED_GRID`` with ``DEGREE_NODES`` and ``DEGREE_OVERLAP`` (session 83's
+#: ``DEGREE_SE_NODES`` is not in it; under ``MarkovSignal`` the fine nodes hardly bind).
+#: Before, ``degree_128x96_floor96`` (session 67's ``DEGREE_OVERLAP``).
+NOW = "degree_s82"
 #: Candidate grids evaluated afterwards on the stored designs (``--add``).
 EXTRA = dict(
     degree=dict(jj.BALANCED_GRID, overlap_nodes=(128, 128), overlap_floor=128),
@@ -200,11 +204,12 @@ def main(argv=None) -> None:
 
 
 def _route_now(row):
-    """The grid the default gives such a design now: the balanced plan if it cancels or is
-    steeper than ``STEEP_SLOPE`` (``BALANCED_GRID`` with ``DEGREE_OVERLAP``, the ``degree``
-    grid, once measured), else the steep tier's."""
-    if row["cancels"] or row["slope"] > _merit.STEEP_SLOPE:
-        return next((k for k in (NOW, "degree") if k in row["errors"]), "balanced")
+    """The grid the default gives such a design now: the balanced plan (``NOW``, or the
+    latest earlier plan measured) if it cancels or is steeper than ``DEGREE_STEEP_SLOPE``,
+    else the steep tier's."""
+    if row["cancels"] or row["slope"] > _merit.DEGREE_STEEP_SLOPE:
+        return next((k for k in (NOW, "degree_128x96_floor96", "degree") if k in row["errors"]),
+                    "balanced")
     return "steep"
 
 
@@ -234,9 +239,10 @@ def _lines(report, load):
              f"{report.get('seed', 2)}); reference {report['reference']}. Each route's grid is "
              "called directly (no shortcut, no one-ray plan); `degree...`: `BALANCED_GRID` with "
              "the overlap rule (across, along) and floor named (`degree`: (128, 128) floor "
-             f"128); `{NOW}` is `DEGREE_OVERLAP`, the balanced plan of a program for such "
-             "designs; `now`: the route this package takes (the balanced plan for a design "
-             f"that cancels or is steeper than `STEEP_SLOPE` = {_merit.STEEP_SLOPE:g}, else "
+             f"128); `{NOW}` is the balanced plan of a program for such designs "
+             "(`DEGREE_NODES`, `DEGREE_OVERLAP`); `now`: the route this package takes (the "
+             "balanced plan for a design that cancels or is steeper than "
+             f"`DEGREE_STEEP_SLOPE` = {_merit.DEGREE_STEEP_SLOPE:g}, else "
              "the steep tier's grid)."
              + (f" {seconds:.0f} s in all." if seconds else ""), ""]
     header = ("| designs | count | " + " | ".join(f"{k} > 1e-4 | {k} > 1e-5 | {k} worst"
