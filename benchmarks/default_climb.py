@@ -37,6 +37,14 @@ results' name (``default_climb_zernike``, ``default_climb_powerlaw``,
 than their balanced plan (``ZERNIKE_REFERENCE``, ``ZERNIKE_FINER``), and ``--preset high``
 against references with more fine S_e nodes than ``"high"``'s grids (since session 83).
 
+``--gradient`` climbs on the error of the gradient instead of the value's (since session 84):
+``jax.value_and_grad`` under ``jit`` in the coefficients, the field, ``u`` and the noise
+variance, each component taken as a sensitivity ``s_i = sigma_i (dJ/dx_i) / J`` (``sigma_i``
+one wave for a coefficient, 1 for the field, the value itself for ``u`` and the noise), and
+the design's error ``max_i |s_i - s_i^ref| / max_i |s_i^ref|`` against the same program on the
+reference grid. The value's error is kept beside it (``value_error``). Adds ``_gradient`` to
+the results' name.
+
 Writes ``results/default_climb.json`` and ``.md`` (``--preset high``: ``default_climb_high``;
 ``--start``: ``default_climb_given`` and ``--tag``).
 """
@@ -44,6 +52,7 @@ Writes ``results/default_climb.json`` and ``.md`` (``--preset high``: ``default_
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 import time
@@ -54,6 +63,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import _common as common  # noqa: E402 - turns on float64
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
@@ -94,9 +105,50 @@ def _design(row):
             jj.WhiteNoise(row["noise"]))
 
 
-def _evaluate(row, preset, reference_grid=REFERENCE):
+@functools.cache
+def _gradient_program(options, noll, powerlaw):
+    """Jitted ``value_and_grad`` of the JMSE in (coefficients, field, u, noise) with the
+    jmse options ``options`` (a sorted tuple of items); ``noll`` is None for Seidel designs."""
+
+    def merit(c, field, u, noise, spectrum):
+        ab = (jj.Seidel(**dict(zip(TERMS, c, strict=True))) if noll is None
+              else jj.Zernike(c, noll=noll))
+        signal = (jj.PowerLawSignal(spectrum[0], spectrum[1], spectrum[2]) if powerlaw
+                  else jj.MarkovSignal(1.0, spectrum[0]))
+        return jj.jmse(ab, field, u, signal, jj.WhiteNoise(noise), **dict(options))
+
+    return jax.jit(jax.value_and_grad(merit, argnums=(0, 1, 2, 3)))
+
+
+def _sensitivities(row, options):
+    """The value and the sensitivities ``sigma_i (dJ/dx_i) / J`` (module docstring) of the
+    design ``row`` under the jmse options ``options``."""
+    noll = tuple(row["noll"]) if "noll" in row else None
+    c = (np.asarray(row["coefficients"], float) if noll is not None
+         else np.array([row["coefficients"][k] for k in TERMS]))
+    powerlaw = "exponent" in row
+    spectrum = (np.array([row["amplitude"], row["exponent"], row["knee"]]) if powerlaw
+                else np.array([row["correlation_length"]]))
+    program = _gradient_program(tuple(sorted(options.items())), noll, powerlaw)
+    value, (g_c, g_field, g_u, g_noise) = program(
+        jnp.asarray(c), jnp.asarray(row["field"]), jnp.asarray(row["u"]),
+        jnp.asarray(row["noise"]), jnp.asarray(spectrum))
+    value = float(value)
+    s = np.concatenate([np.asarray(g_c), [float(g_field), row["u"] * float(g_u),
+                                          row["noise"] * float(g_noise)]]) / value
+    return value, s
+
+
+def gradient_error(s, s_ref):
+    """``max_i |s_i - s_ref_i| / max_i |s_ref_i|`` (the climb's measure with ``--gradient``)."""
+    return float(np.max(np.abs(s - s_ref)) / np.max(np.abs(s_ref)))
+
+
+def _evaluate(row, preset, reference_grid=REFERENCE, gradient=False):
     """``row`` with the preset's value, route and error against ``reference_grid``, or None
-    when a concrete call warns (the design is outside the checked range)."""
+    when a concrete call warns (the design is outside the checked range). With
+    ``gradient``, ``error`` is the gradient's (``gradient_error``) and ``value_error`` the
+    value's."""
     design = _design(row)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -106,10 +158,16 @@ def _evaluate(row, preset, reference_grid=REFERENCE):
             return None
     route = _route(*design, preset=preset) if preset == "default" else {}
     reference = float(jj.jmse(*design, **reference_grid))
-    return dict(row, value=value, reference=reference, error=abs(value / reference - 1.0),
-                strength=float(jj.aberration_strength(*design[:3])),
-                tier=route.get("tier"), path=route.get("path"),
-                balanced=route.get("balanced"), one_ray=route.get("one_ray"))
+    out = dict(row, value=value, reference=reference, error=abs(value / reference - 1.0),
+               strength=float(jj.aberration_strength(*design[:3])),
+               tier=route.get("tier"), path=route.get("path"),
+               balanced=route.get("balanced"), one_ray=route.get("one_ray"))
+    if gradient:
+        _, s = _sensitivities(row, dict(preset=preset))
+        _, s_ref = _sensitivities(row, reference_grid)
+        out.update(value_error=out["error"], error=gradient_error(s, s_ref),
+                   sensitivities=s.tolist(), reference_sensitivities=s_ref.tolist())
+    return out
 
 
 def _orders(noll):
@@ -182,7 +240,8 @@ def _describe(row):
 
 def _family_flags(args):
     flags = "" if args.family == "seidel" else f" --family {args.family} --noll {args.noll}"
-    return flags + ("" if args.signal == "markov" else f" --signal {args.signal}")
+    flags += "" if args.signal == "markov" else f" --signal {args.signal}"
+    return flags + (" --gradient" if args.gradient else "")
 
 
 def main(argv=None):
@@ -199,6 +258,8 @@ def main(argv=None):
     parser.add_argument("--noll", type=int, default=22,
                         help="highest Noll index of --family zernike (from 4)")
     parser.add_argument("--signal", default="markov", choices=("markov", "powerlaw"))
+    parser.add_argument("--gradient", action="store_true",
+                        help="climb on the gradient's error (module docstring)")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     reference_grid, finer_grid = ((ZERNIKE_REFERENCE, ZERNIKE_FINER) if args.family == "zernike"
@@ -211,7 +272,7 @@ def main(argv=None):
     sample = []
     for i in range(args.designs):
         row = _evaluate(_random_row(rng, args.family, args.signal, args.noll), args.preset,
-                        reference_grid)
+                        reference_grid, args.gradient)
         if row is not None:
             sample.append(dict(row, design=i))
     worst = max((r["error"] for r in sample), default=float("nan"))
@@ -219,23 +280,33 @@ def main(argv=None):
           f"{worst:.2e} [{time.perf_counter() - start:.0f} s]", flush=True)
     starts = sorted(sample, key=lambda r: -r["error"])[:args.starts]
     if args.start is not None:
-        starts = [dict(_evaluate(args.start, args.preset, reference_grid), design="given")]
+        starts = [dict(_evaluate(args.start, args.preset, reference_grid, args.gradient),
+                       design="given")]
     climbs = []
     for row in starts:
         best, improved = row, 0
         for _ in range(args.steps):
-            candidate = _evaluate(_step(best, rng), args.preset, reference_grid)
+            candidate = _evaluate(_step(best, rng), args.preset, reference_grid,
+                                  args.gradient)
             if candidate is not None and candidate["error"] > best["error"]:
                 best, improved = candidate, improved + 1
         finer = float(jj.jmse(*_design(best), **finer_grid))
         best = dict(best, finer=finer, reference_change=abs(best["reference"] / finer - 1.0),
                     error_finer=abs(best["value"] / finer - 1.0))
+        if args.gradient:
+            _, s_finer = _sensitivities(best, finer_grid)
+            s_ref = np.asarray(best["reference_sensitivities"])
+            best.update(value_error_finer=best["error_finer"],
+                        error_finer=gradient_error(np.asarray(best["sensitivities"]), s_finer),
+                        reference_change=gradient_error(s_ref, s_finer))
         climbs.append(dict(start=row, worst=best, improved=improved))
         print(f"climb from design {row['design']} ({row['error']:.2e}): {best['error']:.2e} "
               f"after {improved} improvements, tier {best['tier']} path {best['path']}, "
               f"reference moves {best['reference_change']:.1e} on the finer grid "
               f"[{time.perf_counter() - start:.0f} s]", flush=True)
     errors = np.array([r["error"] for r in sample] or [np.nan])
+    measure = ("the gradient's error (sensitivities, module docstring; the value's error in "
+               "the last column)" if args.gradient else "the value's relative error")
     lines = [f"# Adversarial accuracy of `preset={args.preset!r}`", "",
              f"`python benchmarks/default_climb.py --designs {args.designs} --starts "
              f"{args.starts} --steps {args.steps} --preset {args.preset} --seed {args.seed}"
@@ -243,19 +314,23 @@ def main(argv=None):
              "", common.machine_line(common.machine_info(), common.load_average()), "",
              f"Random sample: {len(sample)} of {args.designs} designs in the checked range; "
              f"error median {np.median(errors):.1e}, worst {errors.max():.2e}. Reference "
-             f"{reference_grid}; the climbs' worst designs re-checked on {finer_grid}.", "",
+             f"{reference_grid}; the climbs' worst designs re-checked on {finer_grid}. "
+             f"Error: {measure}.", "",
              "| start | its error | worst found | on the finer reference | reference change | "
-             "strength | tier | path | design |", "|---|---|---|---|---|---|---|---|---|"]
+             "strength | tier | path | design |" + (" value's error |" if args.gradient else ""),
+             "|---|---|---|---|---|---|---|---|---|" + ("---|" if args.gradient else "")]
     for c in climbs:
         w = c["worst"]
         lines.append(
             f"| {c['start']['design']} | {c['start']['error']:.2e} | {w['error']:.2e} | "
             f"{w['error_finer']:.2e} | {w['reference_change']:.1e} | {w['strength']:.2f} | "
-            f"{w['tier']} | {w['path']} | {_describe(w)} |")
+            f"{w['tier']} | {w['path']} | {_describe(w)} |"
+            + (f" {w['value_error']:.1e} |" if args.gradient else ""))
     print("\n".join(lines))
     name = "default_climb" if args.preset == "default" else f"default_climb_{args.preset}"
     name += "" if args.family == "seidel" else f"_{args.family}"
     name += "" if args.signal == "markov" else f"_{args.signal}"
+    name += "_gradient" if args.gradient else ""
     name += "" if args.start is None else "_given" + args.tag
     common.write_report(name, dict(machine=common.machine_info(), preset=args.preset,
                                    family=args.family, signal=args.signal,

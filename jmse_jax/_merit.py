@@ -271,7 +271,7 @@ _SHORTCUT = TierShortcut(trial=None, check=_CHECK_GRID, rtol=1e-5, u_max=_REACHE
 
 #: The fourth tier's grid; the steep tier's (``_STEEP_GRID``) differs in its overlap rule
 #: and its fine angular count.
-_TIER3_GRID = dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(56, 40))
+_TIER3_GRID = dict(nodes=(96, 48), se_nodes=(4800, 256), overlap_nodes=(56, 40), peaks=True)
 #: The steep tier's grid: tier 3's with the overlap rule (64, 64) (``STEEP_SLOPE``) and, since
 #: session 81, 512 angular fine ``S_e`` nodes, for the designs that ``EDGE_TIER_SNR`` sends
 #: here: under a flat spectrum at high SNR ``S_e`` turns from ``S_n / |H|^2`` to ``S_x``
@@ -322,12 +322,26 @@ _STEEP_GRID = dict(_TIER3_GRID, se_nodes=(4800, 512), overlap_nodes=(64, 64), ov
 #: (64, 64) on every panel (floor 64), which costs about 1.8x tier 3's value time (session
 #: 56: a fifth grid adds about 7 % to the default's compile, where giving tier 3 itself that
 #: rule cost every strong design the 1.8x).
+#: Since session 84 the own grids of tiers 2, 3 and steep (``_TIER3_GRID``) integrate the
+#: narrow peaks of ``S_e`` in closed form (``peaks``, ``jmse_jax._ridges``). Their values did
+#: not need it, but their gradients did: where a near-axis design's OTF nearly vanishes on
+#: rings, the peaks move across the fine nodes as a coefficient or ``u`` moves, and the fine
+#: rule's small error oscillates with the node spacing, which the derivative amplifies. A
+#: climb on the gradient's error (``benchmarks/default_climb.py --gradient --signal
+#: powerlaw``) found a tier-3 design 1.3e-6 off in its value and 3.1e-2 in its gradient
+#: (2.4e-5 with the peaks), and 6 waves of defocus with 0.5 of astigmatism at field 0.1, u
+#: 0.3, noise 1e-4 (tier 2) was 4.5e-2 off (3.5e-7). Cost: about 3 % of those tiers' time
+#: where no minimum is narrow (``hypercube_0`` 37.4 -> 39.4 ms a value, ``hypercube_2``
+#: 95.7 -> 99.3 ms, one core), 30-45 % where one is, and about 10 % of the default's
+#: compile (one core: value 20.9 -> 22.9 s, value_and_grad 47.9 -> 52.7 s); the weak tiers,
+#: whose designs' gradients were within 3.5e-5 on the same climbs, keep their grids.
 DEFAULT_TIERS: tuple[tuple[float, float, dict, TierShortcut | None], ...] = (
     (1.0, 0.5, _TIER0_GRID, _SHORTCUT),
     (5.0, math.inf, dict(nodes=(40, 20), se_nodes=(2400, 160), overlap_nodes=(28, 24),
                          overlap_floor=_WEAK_FLOOR),
      _SHORTCUT),
-    (15.0, _REACHES_CUTOFF_U, dict(nodes=(64, 40), se_nodes=(4800, 128), overlap_nodes=(40, 32)),
+    (15.0, _REACHES_CUTOFF_U, dict(nodes=(64, 40), se_nodes=(4800, 128), overlap_nodes=(40, 32),
+                                   peaks=True),
      None),
     (math.inf, math.inf, _TIER3_GRID, None),
     # The steep tier: reached only through STEEP_SLOPE and EDGE_TIER_SNR (the tier before it
@@ -519,8 +533,9 @@ _PRESET_ONLY = ("tiers", "radial", "balanced", "steep", "ray")
 #: along the ray derived from the grid (``radial_counts``); overriding a grid option turns it
 #: off too. ``peaks``: the polar grids' fine stage integrates the narrow peaks of ``S_e``
 #: at the minima of ``|H|^2`` along its rays in closed form (``jmse_jax._ridges``); on in
-#: ``"high"`` only, as it costs every program that holds a grid about 1.5 s of compile
-#: (3 s with a gradient) and doubles the time of a design that has such peaks.
+#: ``"high"``, and in the default only in the own grids of its strong tiers (2, 3 and
+#: steep: ``DEFAULT_TIERS``), as it costs every program that holds a grid about 1.5 s of
+#: compile (3 s with a gradient) and doubles the time of a design that has such peaks.
 #: ``balanced``: the grid taken by designs off the axis whose terms cancel
 #: (``BALANCED_CANCELLATION``; ``BALANCED_GRID``, ``HIGH_BALANCED_GRID``); None in ``"fast"``
 #: and when a grid option is overridden.
@@ -1831,10 +1846,13 @@ def jmse(
         ``"polar"`` with ``se_nodes`` only: where ``|H|^2`` has a minimum along a ray of the
         fine grid whose peak of ``S_e`` is too narrow for the fine nodes (designs near the
         axis at high SNR), integrate that peak in closed form (``jmse_jax._ridges``). On in
-        the ``"high"`` preset; off in ``"fast"`` and ``"default"``, where it would add about
-        40 % to the compile time and double the time of a design that has such peaks. Not
-        a grid option: ``peaks=True`` keeps the default's tiers (their own grids take it,
-        the shortcuts' first and check grids do not).
+        the ``"high"`` preset; off in ``"fast"``, and in the ``"default"`` preset's weak
+        tiers (0 and 1), where it would add about 20 % to the compile time and double the
+        time of a design that has such peaks. The default's tiers 2, 3 and steep have it
+        in their own grids (``DEFAULT_TIERS``, since session 84: without it a near-axis
+        design's gradient was up to 4.5e-2 off where its value was right to 2e-6). Not a
+        grid option: ``peaks=True`` keeps the default's tiers (their own grids take it, the
+        shortcuts' first and check grids do not).
 
     Returns
     -------
