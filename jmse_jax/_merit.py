@@ -1847,8 +1847,9 @@ def jmse(
         fine grid whose peak of ``S_e`` is too narrow for the fine nodes (designs near the
         axis at high SNR), integrate that peak in closed form (``jmse_jax._ridges``). On in
         the ``"high"`` preset; off in ``"fast"``, and in the ``"default"`` preset's weak
-        tiers (0 and 1), where it would add about 20 % to the compile time and double the
-        time of a design that has such peaks. The default's tiers 2, 3 and steep have it
+        tiers (0 and 1), where it would add to the compile time of every program (the
+        strong tiers' peaks added about 10 %) and double the time of a design that has
+        such peaks. The default's tiers 2, 3 and steep have it
         in their own grids (``DEFAULT_TIERS``, since session 84: without it a near-axis
         design's gradient was up to 4.5e-2 off where its value was right to 2e-6). Not a
         grid option: ``peaks=True`` keeps the default's tiers (their own grids take it, the
