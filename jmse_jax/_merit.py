@@ -1849,11 +1849,11 @@ def jmse(
         the ``"high"`` preset; off in ``"fast"``, and in the ``"default"`` preset's weak
         tiers (0 and 1), where it would add to the compile time of every program (the
         strong tiers' peaks added about 10 %) and double the time of a design that has
-        such peaks. The default's tiers 2, 3 and steep have it
-        in their own grids (``DEFAULT_TIERS``, since session 84: without it a near-axis
-        design's gradient was up to 4.5e-2 off where its value was right to 2e-6). Not a
-        grid option: ``peaks=True`` keeps the default's tiers (their own grids take it, the
-        shortcuts' first and check grids do not).
+        such peaks. The default's tiers 2, 3 and steep have it in their own grids
+        (``DEFAULT_TIERS``, since session 84: without it a near-axis design's gradient was
+        up to 4.5e-2 off where its value was right to 2e-6). Not a grid option:
+        ``peaks=True`` keeps the default's tiers (their own grids take it, the shortcuts'
+        first and check grids do not).
 
     Returns
     -------

@@ -215,20 +215,24 @@ def test_minimum_search_converges_before_its_differentiated_steps():
             assert float(jacobian[row, row, i]) == pytest.approx(fd, rel=1e-5)
 
 
-def test_near_axis_design_against_a_finer_grid():
-    # The same OTF nodes, so only the fine stage differs; 19 200 fine radial nodes without
-    # closed forms converge (9600 leave 1e-5 in the gradient).
+def _near_axis_with_and_without_peaks(grid, se_nodes):
+    """``NEAR_AXIS`` at noise 1e-4 on ``grid``: (value, gradient in ``w020``, ``w222`` and
+    the field) with the closed-form peaks, without them, and without them on the fine rule
+    ``se_nodes`` (the same OTF nodes, so only the fine stage differs)."""
     ab, field, u = NEAR_AXIS
 
-    def vector(value_and_grad):
-        value, (g_ab, g_field) = value_and_grad
+    def vector(ridges, grid=grid):
+        value, (g_ab, g_field) = _grid_value_and_grad(grid, ab, field, u, 1e-4, ridges=ridges)
         return float(value), np.array([g_ab.w020, g_ab.w222, g_field])
 
-    value, grad = vector(_grid_value_and_grad(TIER1, ab, field, u, 1e-4))
-    plain_value, plain_grad = vector(_grid_value_and_grad(TIER1, ab, field, u, 1e-4,
-                                                          ridges=False))
-    finer = {**TIER1, "se_nodes": (19200, 160)}
-    ref_value, ref_grad = vector(_grid_value_and_grad(finer, ab, field, u, 1e-4, ridges=False))
+    return vector(True), vector(False), vector(False, {**grid, "se_nodes": se_nodes})
+
+
+def test_near_axis_design_against_a_finer_grid():
+    # 19 200 fine radial nodes without closed forms converge (9600 leave 1e-5 in the
+    # gradient).
+    (value, grad), (plain_value, plain_grad), (ref_value, ref_grad) = (
+        _near_axis_with_and_without_peaks(TIER1, (19200, 160)))
     scale = np.max(np.abs(ref_grad))
     assert value == pytest.approx(ref_value, rel=1e-10)
     assert np.max(np.abs(grad - ref_grad)) < 2e-6 * scale
@@ -268,18 +272,9 @@ def test_default_strong_tiers_integrate_the_peaks():
     route = _merit._route(ab, field, u, signal, noise)
     assert route["tier"] == 2 and route["path"] == "grid"
     assert all(jj.DEFAULT_TIERS[i][2]["peaks"] for i in (2, 3, 4))
-    grid = jj.DEFAULT_TIERS[2][2]
-
-    def vector(result):
-        value, (g_ab, g_field) = result
-        return float(value), np.array([g_ab.w020, g_ab.w222, g_field])
-
-    value, grad = vector(_grid_value_and_grad(grid, ab, field, u, 1e-4))
+    (value, grad), (_, plain_grad), (ref_value, ref_grad) = (
+        _near_axis_with_and_without_peaks(jj.DEFAULT_TIERS[2][2], (19200, 128)))
     assert float(jj.jmse(ab, field, u, signal, noise)) == pytest.approx(value, rel=1e-13)
-    plain_value, plain_grad = vector(_grid_value_and_grad(grid, ab, field, u, 1e-4,
-                                                          ridges=False))
-    finer = {**grid, "se_nodes": (19200, 128)}
-    ref_value, ref_grad = vector(_grid_value_and_grad(finer, ab, field, u, 1e-4, ridges=False))
     scale = np.max(np.abs(ref_grad))
     assert value == pytest.approx(ref_value, rel=1e-9)  # measured 4.3e-11
     assert np.max(np.abs(grad - ref_grad)) < 1e-5 * scale  # measured 5.3e-7
