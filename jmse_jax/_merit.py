@@ -127,22 +127,35 @@ CANCELLING_STRENGTH = 2.5
 #: reached 6.3); see ``BALANCED_GRID``.
 CHECKED_CANCELLATION = 7.0
 #: The largest peak signal-to-noise ratio ``max S_x / S_n`` over the band at which the
-#: presets' polar grids were checked to 1e-4 (a noise variance of about 8e-5 under
-#: ``MarkovSignal(1, 5)``, whose ``S_x(0)`` is 157; the bank's lowest noise, 1e-4, is
-#: 1.6e6). Beyond it the peaks of ``S_e`` where the OTF nearly vanishes on a ring (designs
-#: near rotational symmetry), of width ``~ sqrt(S_n / S_x)``, grow narrower than the fine
-#: grids resolve (docs/accuracy.md, "Accuracy at low noise"); a concrete call that takes a
-#: polar grid of a preset gets a ``UserWarning``. Rotationally symmetric designs are held to
-#: ``CHECKED_SNR_PEAKS`` instead: their one-ray plans integrate those peaks in closed form
-#: (single terms checked to a peak ratio of 1.6e16; defocus balanced against spherical
-#: aberration within 7e-5 up to 1.6e8 but 1.4e-2 off at 1.6e10, ``balanced_one_ray.py``).
+#: polar grids of ``"fast"`` and the default were checked (a noise variance of about 8e-5
+#: under ``MarkovSignal(1, 5)``, whose ``S_x(0)`` is 157; the bank's lowest noise, 1e-4, is
+#: 1.6e6). Beyond it narrow features of ``S_e`` outgrow the fine grids: its peaks where the
+#: OTF nearly vanishes on a ring (designs near rotational symmetry), of width
+#: ``~ sqrt(S_n / S_x)`` (docs/accuracy.md, "Accuracy at low noise"), and, under flat
+#: signal spectra, its turn from ``S_n / |H|^2`` to ``S_x`` along curves that the rays cross
+#: obliquely. Session 85's climbs at peak ratios 2e6-2e8 (``default_climb.py --noise``)
+#: found the default's steep tier 4.7e-4 off in the value and 1e-1 in the gradient under
+#: power-law spectra (under Markov spectra 1.3e-5 and 6.3e-4; near the axis its strong
+#: tiers' peaks hold it within 1e-6), with ``peaks=True`` too, since that tier has them
+#: already. A concrete call that takes a polar grid of a preset gets a ``UserWarning``.
+#: ``"high"`` is held to ``CHECKED_SNR_PEAKS`` instead, and so are rotationally symmetric
+#: designs: their one-ray plans integrate those peaks in closed form (single terms checked
+#: to a peak ratio of 1.6e16; defocus balanced against spherical aberration within 7e-5 up
+#: to 1.6e8 but 1.4e-2 off at 1.6e10, ``balanced_one_ray.py``).
 CHECKED_SNR = 2e6
-#: ``CHECKED_SNR`` for calls with ``peaks=True`` (the ``"high"`` preset), whose polar grids
-#: integrate those peaks in closed form (``jmse_jax._ridges``), and for rotationally
-#: symmetric designs (one-ray plans, ``CHECKED_SNR``'s note): checked near the axis to
-#: a peak ratio of 1.6e8 (``benchmarks/low_noise.py``: values within 7e-6 (default) and
-#: 3e-9 (``"high"``) up to 1.6e9; gradients within 5e-5 and 4e-7 at 1.6e7, 7e-4 and 3e-6 at
-#: 1.6e8: near the axis at high SNR take ``"high"``).
+#: ``CHECKED_SNR`` for calls whose polar grids integrate those peaks in closed form
+#: (``jmse_jax._ridges``) without the default's tiers (``peaks=True``: the ``"high"``
+#: preset), and for rotationally symmetric designs (one-ray plans, ``CHECKED_SNR``'s note).
+#: Checked near the axis to a peak ratio of 1.6e8 (``benchmarks/low_noise.py``: values
+#: within 3e-9 up to 1.6e9, gradients within 4e-7 at 1.6e7 and 3e-6 at 1.6e8) and off it by
+#: session 85's climbs of ``"high"`` under power-law spectra at peak ratios 2e6-2e8
+#: (``default_climb.py --preset high --noise``): values within 7.6e-6. Its gradients there
+#: were not held: up to 9.7e-2 off (value 9e-7) on a strong design near the cutoff (its
+#: balanced grid), where ``S_e`` turns from ``S_n / |H|^2`` to ``S_x`` along curves
+#: narrower than its 960 angular fine nodes (``HIGH_STEEP_GRID``'s counts there: 2.0e-2;
+#: with 1920 angular nodes 8.7e-3, 3840 1.9e-5; the count needed grows with the ratio, and
+#: doubling it costs every ``"high"`` design half its time again), so ``optimise``,
+#: which follows the gradient, warns past ``CHECKED_SNR`` even with ``"high"``.
 CHECKED_SNR_PEAKS = 2e8
 #: Largest ``S_x / S_n`` on the innermost ring where the OTF can vanish (``_ring_snr``) at
 #: which the default's two weakest tiers are used: a design above the first bound skips
@@ -1853,7 +1866,8 @@ def jmse(
         (``DEFAULT_TIERS``, since session 84: without it a near-axis design's gradient was
         up to 4.5e-2 off where its value was right to 2e-6). Not a grid option:
         ``peaks=True`` keeps the default's tiers (their own grids take it, the shortcuts'
-        first and check grids do not).
+        first and check grids do not), and their noise bound ``CHECKED_SNR``: off the axis
+        under flat spectra the steep tier, which has the peaks, was 4.7e-4 off beyond it.
 
     Returns
     -------
@@ -1867,9 +1881,9 @@ def jmse(
     slope ``max |grad W|`` does (``CHECKED_SLOPE``, 65 waves per pupil radius: at small
     ``u`` a design of moderate strength can hold many waves), gets a
     ``UserWarning`` unless grid options are given, and so does a peak ``max S_x / S_n``
-    above ``CHECKED_SNR`` (2e6; ``CHECKED_SNR_PEAKS``, 2e8, with ``peaks`` or for a
-    rotationally symmetric design, whose one-ray plan integrates them in closed form): where
-    the OTF nearly vanishes on a ring the peaks of ``S_e`` outgrow the grids
+    above ``CHECKED_SNR`` (2e6; ``CHECKED_SNR_PEAKS``, 2e8, with ``peaks`` outside the
+    default's tiers, as in ``"high"``, or for a rotationally symmetric design, whose one-ray
+    plan integrates them in closed form): narrow features of ``S_e`` then outgrow the grids
     (docs/accuracy.md, "Accuracy at low noise").
     Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
     under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u <= 0``, the
@@ -2192,33 +2206,61 @@ def _peak_snr(u, signal, noise):
     return jnp.max(signal(nu_x, nu_y) / noise(nu_x, nu_y))
 
 
-def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False):
+def _snr_peaks(options) -> bool:
+    """Whether calls with the full ``options`` (``jmse_options``) are held to
+    ``CHECKED_SNR_PEAKS`` rather than ``CHECKED_SNR``: with ``peaks`` and without the
+    default's tiers (``"high"``). The default's steep tier has the peaks and was measured
+    4.7e-4 off at a peak ratio of 1.1e8 (``CHECKED_SNR``), so ``peaks=True`` does not lift
+    the default's bound."""
+    return bool(options["peaks"]) and options["tiers"] is None
+
+
+def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient=False):
     """A ``UserWarning`` when the concrete spectra's peak ``S_x / S_n`` exceeds
     ``CHECKED_SNR`` (for calls with a preset's grids), or ``CHECKED_SNR_PEAKS`` with the
-    closed-form peaks (``peaks``: the option, or a one-ray plan)."""
+    closed-form peaks (``peaks``: ``_snr_peaks`` of the options, or a one-ray plan).
+    ``gradient`` (``optimise``, which follows the gradient): with the peaks, a warning
+    between the two bounds too, since ``"high"``'s gradient was checked off the axis only
+    to ``CHECKED_SNR``."""
     snr = float(_peak_snr(u, signal, noise))
+    if peaks and gradient and CHECKED_SNR < snr <= CHECKED_SNR_PEAKS:
+        warnings.warn(
+            f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
+            f"gradients of the polar grids were checked at off the axis ({CHECKED_SNR:.0e}; "
+            f"the values of preset='high' hold to {CHECKED_SNR_PEAKS:.0e}): under a flat "
+            f"signal spectrum S_e turns from S_n/|H|^2 to S_x along narrow curves, and the "
+            f"gradient the optimiser follows may be off by percents where the value is "
+            f"right (preset='high' at 1.3e8: value 9e-7, gradient 1e-1; "
+            f"benchmarks/default_climb.py --preset high --gradient --noise). Give finer "
+            f"se_nodes (the angular count: 3840 held that design to 2e-5) and compare two "
+            f"of them",
+            UserWarning, stacklevel=stacklevel)
+        return
     if peaks:
         if snr > CHECKED_SNR_PEAKS:
             warnings.warn(
                 f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
-                f"grids with closed-form peaks (peaks=True, and the one-ray plans of designs "
-                f"on the axis) were checked at ({CHECKED_SNR_PEAKS:.0e}; "
-                f"benchmarks/low_noise.py, benchmarks/balanced_one_ray.py): on and near the "
-                f"axis the JMSE and its gradient may be off by more than 1e-4 (1e-2 measured "
-                f"at 1.6e10 on defocus balanced against spherical aberration). Give finer "
-                f"grids and compare two of them",
+                f"grids with closed-form peaks (peaks=True outside the default's tiers, as in "
+                f"preset='high', and the one-ray plans of designs on the axis) were checked at "
+                f"({CHECKED_SNR_PEAKS:.0e}; "
+                f"benchmarks/low_noise.py, default_climb.py --noise, balanced_one_ray.py): "
+                f"the JMSE and its gradient may be off by more than 1e-4 (1e-2 measured at "
+                f"1.6e10 on defocus balanced against spherical aberration). Give finer grids "
+                f"and compare two of them",
                 UserWarning, stacklevel=stacklevel)
         return
     if snr > CHECKED_SNR:
         warnings.warn(
             f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
-            f"presets' polar grids were checked at ({CHECKED_SNR:.0e}): where the OTF "
-            f"nearly vanishes on a ring (designs near the axis) the peaks of S_e are "
-            f"narrower than the grids resolve, and the JMSE may be off by 1e-4 to percents "
-            f"(measured near the axis: 1e-4 at 5e6, 1e-3 at 1.6e8, 6e-2 at 1.6e10; "
-            f"benchmarks/low_noise.py), its gradient by more (3-8 % at 1.6e7). Pass "
-            f"peaks=True (closed-form peaks, on in preset='high'; checked to "
-            f"{CHECKED_SNR_PEAKS:.0e}), or give finer se_nodes and compare two of them",
+            f"polar grids of 'fast' and the default were checked at ({CHECKED_SNR:.0e}): "
+            f"narrow features of S_e (its peaks where the OTF nearly vanishes on a ring, "
+            f"near the axis; its turn from S_n/|H|^2 to S_x under a flat signal spectrum) "
+            f"outgrow the grids, and the JMSE may be off by 1e-4 to percents, its gradient "
+            f"by more (measured at 2e6-2e8: 'fast' 1e-2 near the axis; the default 4.7e-4 "
+            f"off the axis under a power-law spectrum, its gradient 1e-1; "
+            f"benchmarks/low_noise.py, default_climb.py --noise). Use preset='high' "
+            f"(checked to {CHECKED_SNR_PEAKS:.0e}), or give finer se_nodes and compare two "
+            f"of them",
             UserWarning, stacklevel=stacklevel)
 
 
@@ -2309,8 +2351,8 @@ def _concrete_merit(static, inputs, warn=False):
         warnings.warn(_cancellation_message(f"{cancellation:.3g}", static.value[4] is not None),
                       UserWarning, stacklevel=3)
     if warn:  # the one-ray plans integrate the peaks in closed form, as peaks=True does
-        _warn_beyond_checked_snr(*inputs[2:], stacklevel=4,
-                                 peaks=bool(symmetric) or static.value[0]["peaks"])
+        _warn_beyond_checked_snr(*inputs[2:], stacklevel=4, peaks=bool(symmetric) or _snr_peaks(
+            dict(static.value[0], tiers=static.value[1])))
     plan = plans[index]
     if symmetric:
         radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])

@@ -24,6 +24,7 @@ import optimistix as optx
 
 from ._merit import (
     _GRID_OPTIONS,
+    _snr_peaks,
     _warn_beyond_checked_snr,
     jmse,
     jmse_options as _full_jmse_options,
@@ -152,9 +153,10 @@ def lens_merit(
 
 
 def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavelengths,
-                           jmse_options):
+                           jmse_options, gradient=False):
     """Checks of the arguments ``lens_merit`` and ``optimise`` share; returns ``fields``,
-    the field weights and ``wavelengths`` (None or a 1-D array) as arrays of ``dtype``."""
+    the field weights and ``wavelengths`` (None or a 1-D array) as arrays of ``dtype``.
+    ``gradient`` (``optimise``): the noise check holds the gradient to ``CHECKED_SNR``."""
     check_range("u", u, 0.0, 1.5, low_inclusive=False)
     if np.ndim(u) != 0:
         raise ValueError(f"u must be a scalar, got shape {np.shape(u)}")
@@ -169,7 +171,8 @@ def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavel
             and not any(key in (jmse_options or {}) for key in _GRID_OPTIONS)):
         # lens_merit -> _check_merit_arguments -> here -> warn: the user's call is 4 up.
         _warn_beyond_checked_snr(u, signal, noise, stacklevel=4,
-                                 peaks=_full_jmse_options(**(jmse_options or {}))["peaks"])
+                                 peaks=_snr_peaks(_full_jmse_options(**(jmse_options or {}))),
+                                 gradient=gradient)
     check_range("fields", fields, 0.0, 1.0)
     fields = jnp.asarray(fields, dtype)
     if fields.ndim != 1 or fields.shape[0] == 0:
@@ -660,7 +663,8 @@ def optimise(
         check_range(f"scales[{name!r}]", scales[name], 0.0, None, low_inclusive=False)
     dtype = lens.ep_radius.dtype
     fields, field_weights, wavelengths = _check_merit_arguments(
-        dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options)
+        dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options,
+        gradient=True)
     if bounds is not None and not isinstance(bounds, dict):
         raise TypeError(f"bounds must be a dict name -> (low, high), got {bounds!r}")
     for name, pair in (bounds or {}).items():

@@ -184,7 +184,8 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
     it cannot give them): ``aberration_strength`` beyond ``CHECKED_STRENGTH``, the wavefront
     slope beyond ``CHECKED_SLOPE``, terms that cancel beyond what the preset was checked at
     (``BALANCED_CANCELLATION``, or ``CHECKED_CANCELLATION`` with a preset's balanced
-    grid: the default's and ``"high"``'s), and peak ``S_x / S_n`` beyond ``CHECKED_SNR``.
+    grid: the default's and ``"high"``'s), and peak ``S_x / S_n`` beyond ``CHECKED_SNR``
+    (``CHECKED_SNR_PEAKS`` for ``"high"`` and for designs on the axis).
     Leaves of shape (n,), one design per row; the strength and symmetry of each come from the
     library's own choice of plan (``_concrete_choice``), the bounds from ``_beyond_checked``,
     the noise check is the library's (``_warn_beyond_checked_snr``). Each warning goes to
@@ -200,6 +201,7 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
         _concrete_choice,
         _prepare,
         _slope_message,
+        _snr_peaks,
         _strength_message,
         _warn_beyond_checked_snr,
         jmse_options,
@@ -241,7 +243,7 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
         if not symmetric.all():
             u_max = jnp.asarray(np.max(np.asarray(u)[~symmetric]), np.asarray(u).dtype)
             _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=2,
-                                     peaks=jmse_options(preset)["peaks"])
+                                     peaks=_snr_peaks(jmse_options(preset)))
         else:  # every design on the axis: the one-ray plans integrate the peaks in closed form
             u_max = jnp.asarray(np.max(np.asarray(u)), np.asarray(u).dtype)
             _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=2, peaks=True)

@@ -1097,7 +1097,8 @@ def test_noise_beyond_the_checked_snr_warns():
     its own gets none."""
     near_axis, signal = jj.Seidel(w020=6.0, w222=0.5), jj.MarkovSignal(1.0, 5.0)
     with pytest.warns(UserWarning, match=r"peak signal-to-noise ratio max S_x/S_n = 1\.57e\+07 "
-                                         r"is beyond what the presets' polar grids"):
+                                         r"is beyond what the polar grids of 'fast' and "
+                                         r"the default"):
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-5), preset="fast")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -1106,8 +1107,10 @@ def test_noise_beyond_the_checked_snr_warns():
                 se_nodes=(16, 8), overlap_nodes=(8, 8))
         jj.jmse(jj.Seidel(w020=6.0), 0.0, 0.2, signal, jj.WhiteNoise(1e-6), preset="fast")
     with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond what the grids "
-                                         r"with closed-form peaks \(peaks=True, and the one-ray "
-                                         r"plans of designs on the axis\) were checked at"):
+                                         r"with closed-form peaks \(peaks=True outside the "
+                                         r"default's tiers, as in preset='high', and the "
+                                         r"one-ray plans of designs on the axis\) were "
+                                         r"checked at"):
         jj.jmse(jj.Seidel(w020=6.0), 0.0, 0.2, signal, jj.WhiteNoise(1e-8), preset="fast")
     assert 1.5e6 < 2 * math.pi * 25 / 1e-4 < jj.CHECKED_SNR < 2 * math.pi * 25 / 1e-5
     # With the closed-form peaks of jmse_jax._ridges the grids hold to CHECKED_SNR_PEAKS
@@ -1120,6 +1123,11 @@ def test_noise_beyond_the_checked_snr_warns():
     with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+09 is beyond what the grids "
                                          r"with closed-form peaks"):
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-7), preset="fast", peaks=True)
+    # The default's tiers keep CHECKED_SNR with peaks=True: their steep tier has the peaks
+    # and was 4.7e-4 off at 1.1e8 under a flat spectrum (default_climb.py --noise).
+    with pytest.warns(UserWarning, match=r"1\.57e\+07 is beyond what the polar grids of 'fast' "
+                                         r"and the default"):
+        jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-5), peaks=True)
 
 
 def test_traced_band_past_u_max_is_computed(fig1):

@@ -365,3 +365,14 @@ def test_noise_beyond_the_checked_snr_warns_in_lens_merit_and_optimise():
                 fn(**noisy, jmse_options={"se_nodes": (800, 96), "nodes": (24, 12)})
             with pytest.raises(ValueError, match="fields must be in"):
                 fn(**{**noisy, "noise": jmse_jax.WhiteNoise(1e-4)})  # 1.6e6
+    # "high"'s values hold to CHECKED_SNR_PEAKS, its gradients off the axis only to
+    # CHECKED_SNR (session 85's climbs): at 1.6e8 optimise warns and lens_merit does not.
+    high = dict(noisy, noise=jmse_jax.WhiteNoise(1e-6), jmse_options={"preset": "high"})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="fields must be in"):
+            lens_merit(lens, **high)
+    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+08 is beyond what the gradients "
+                                         r"of the polar grids were checked at off the axis"):
+        with pytest.raises(ValueError, match="fields must be in"):
+            optimise(lens, ("image_shift",), **high)
