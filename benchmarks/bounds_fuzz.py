@@ -124,7 +124,7 @@ def beyond_checked(d: dict, preset: str, family: str) -> list[str]:
                                    balanced=static.value[4] is not None)
     reasons = [name for name, flag in zip(("strength", "slope", "cancellation"), flags[:3],
                                           strict=True) if bool(flag)]
-    peaks = bool(symmetric) or _merit._snr_peaks(dict(static.value[0], tiers=static.value[1]))
+    peaks = bool(symmetric) or _merit._snr_peaks(static.value[0]["peaks"], static.value[1])
     snr = float(_merit._peak_snr(inputs[2], signal, noise))
     if snr > (jj.CHECKED_SNR_PEAKS if peaks else jj.CHECKED_SNR):
         reasons.append("snr")

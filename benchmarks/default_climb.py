@@ -286,16 +286,15 @@ def main(argv=None):
     reference_grid, finer_grid = ((ZERNIKE_REFERENCE, ZERNIKE_FINER) if args.family == "zernike"
                                   else (REFERENCE, FINER))
     if args.preset == "high":
-        # "high"'s grids have up to (6400, 1920) fine S_e nodes (960 angular until session
-        # 85), more than REFERENCE.
+        # "high"'s grids have up to (6400, 960) fine S_e nodes, as many as REFERENCE; the
+        # references have more (2560 angular since session 85, which tried 1920 in "high").
         reference_grid = dict(reference_grid, se_nodes=(8000, 2560))
         finer_grid = dict(finer_grid, se_nodes=(9600, 3200))
     start = time.perf_counter()
     sample = []
     for i in range(args.designs):
         row = _evaluate(_random_row(rng, args.family, args.signal, args.noll, noise),
-                       args.preset,
-                        reference_grid, args.gradient, snr_bound)
+                        args.preset, reference_grid, args.gradient, snr_bound)
         if row is not None:
             sample.append(dict(row, design=i))
     worst = max((r["error"] for r in sample), default=float("nan"))
@@ -304,8 +303,7 @@ def main(argv=None):
     starts = sorted(sample, key=lambda r: -r["error"])[:args.starts]
     if args.start is not None:
         starts = [dict(_evaluate(args.start, args.preset, reference_grid, args.gradient,
-                                 snr_bound),
-                       design="given")]
+                                 snr_bound), design="given")]
     climbs = []
     for row in starts:
         best, improved = row, 0

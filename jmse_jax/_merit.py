@@ -2206,13 +2206,13 @@ def _peak_snr(u, signal, noise):
     return jnp.max(signal(nu_x, nu_y) / noise(nu_x, nu_y))
 
 
-def _snr_peaks(options) -> bool:
-    """Whether calls with the full ``options`` (``jmse_options``) are held to
-    ``CHECKED_SNR_PEAKS`` rather than ``CHECKED_SNR``: with ``peaks`` and without the
+def _snr_peaks(peaks, tiers) -> bool:
+    """Whether calls with the options ``peaks`` and ``tiers`` (``jmse_options``) are held to
+    ``CHECKED_SNR_PEAKS`` rather than ``CHECKED_SNR``: with the peaks and without the
     default's tiers (``"high"``). The default's steep tier has the peaks and was measured
     4.7e-4 off at a peak ratio of 1.1e8 (``CHECKED_SNR``), so ``peaks=True`` does not lift
     the default's bound."""
-    return bool(options["peaks"]) and options["tiers"] is None
+    return bool(peaks) and tiers is None
 
 
 def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient=False):
@@ -2351,8 +2351,8 @@ def _concrete_merit(static, inputs, warn=False):
         warnings.warn(_cancellation_message(f"{cancellation:.3g}", static.value[4] is not None),
                       UserWarning, stacklevel=3)
     if warn:  # the one-ray plans integrate the peaks in closed form, as peaks=True does
-        _warn_beyond_checked_snr(*inputs[2:], stacklevel=4, peaks=bool(symmetric) or _snr_peaks(
-            dict(static.value[0], tiers=static.value[1])))
+        _warn_beyond_checked_snr(*inputs[2:], stacklevel=4, peaks=bool(symmetric)
+                                 or _snr_peaks(static.value[0]["peaks"], static.value[1]))
     plan = plans[index]
     if symmetric:
         radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])

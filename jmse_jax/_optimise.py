@@ -170,8 +170,9 @@ def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavel
     if (signal is not None and noise is not None and is_concrete((u, signal, noise))
             and not any(key in (jmse_options or {}) for key in _GRID_OPTIONS)):
         # lens_merit -> _check_merit_arguments -> here -> warn: the user's call is 4 up.
+        options = _full_jmse_options(**(jmse_options or {}))
         _warn_beyond_checked_snr(u, signal, noise, stacklevel=4,
-                                 peaks=_snr_peaks(_full_jmse_options(**(jmse_options or {}))),
+                                 peaks=_snr_peaks(options["peaks"], options["tiers"]),
                                  gradient=gradient)
     check_range("fields", fields, 0.0, 1.0)
     fields = jnp.asarray(fields, dtype)

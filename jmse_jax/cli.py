@@ -242,8 +242,9 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int
                                               int(beyond.sum()), n), UserWarning, stacklevel=2)
         if not symmetric.all():
             u_max = jnp.asarray(np.max(np.asarray(u)[~symmetric]), np.asarray(u).dtype)
+            options = jmse_options(preset)
             _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=2,
-                                     peaks=_snr_peaks(jmse_options(preset)))
+                                     peaks=_snr_peaks(options["peaks"], options["tiers"]))
         else:  # every design on the axis: the one-ray plans integrate the peaks in closed form
             u_max = jnp.asarray(np.max(np.asarray(u)), np.asarray(u).dtype)
             _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=2, peaks=True)
