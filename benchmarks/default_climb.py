@@ -51,8 +51,13 @@ the results' name.
 is ``CHECKED_SNR``, 2e6): it measures the preset where ``"high"`` claims to hold and the
 default warns (session 85). Adds ``_lownoise`` to the results' name.
 
+``--se-angular`` runs the preset with ``se_angular=jj.se_angular_for(u, signal, noise)``,
+the count ``optimise`` gives ``"high"`` past ``CHECKED_SNR`` (session 86), against
+references with 4/3 and twice ``SE_ANGULAR_BY_SNR``'s largest count of angular fine nodes.
+Adds ``_se_angular`` to the results' name.
+
 Writes ``results/default_climb.json`` and ``.md`` (``--preset high``: ``default_climb_high``;
-``--start``: ``default_climb_given`` and ``--tag``).
+``--start``: ``default_climb_given``; ``--tag`` is appended to any name).
 """
 
 from __future__ import annotations
@@ -150,16 +155,22 @@ def gradient_error(s, s_ref):
     return float(np.max(np.abs(s - s_ref)) / np.max(np.abs(s_ref)))
 
 
-def _evaluate(row, preset, reference_grid=REFERENCE, gradient=False, snr_bound=None):
+def _evaluate(row, preset, reference_grid=REFERENCE, gradient=False, snr_bound=None,
+              se_angular=False):
     """``row`` with the preset's value, route and error against ``reference_grid``, or None
     when a concrete call warns (the design is outside the checked range). With
     ``gradient``, ``error`` is the gradient's (``gradient_error``) and ``value_error`` the
     value's. With ``snr_bound`` the peak ``S_x / S_n`` is held to it instead of the
-    preset's own bound (the peak-SNR warning is then ignored; the others still count)."""
+    preset's own bound (the peak-SNR warning is then ignored; the others still count).
+    With ``se_angular`` the preset runs with ``se_angular=jj.se_angular_for(...)`` of the
+    design's spectra (``optimise``'s choice for ``"high"``), kept as ``se_angular``."""
     design = _design(row)
+    options = dict(preset=preset)
+    if se_angular:
+        options["se_angular"] = jj.se_angular_for(*design[2:])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        value = float(jj.jmse(*design, preset=preset))
+        value = float(jj.jmse(*design, **options))
     snr = float(_peak_snr(*design[2:]))
     texts = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
     if snr_bound is not None:
@@ -174,9 +185,10 @@ def _evaluate(row, preset, reference_grid=REFERENCE, gradient=False, snr_bound=N
                peak_snr=snr,
                strength=float(jj.aberration_strength(*design[:3])),
                tier=route.get("tier"), path=route.get("path"),
-               balanced=route.get("balanced"), one_ray=route.get("one_ray"))
+               balanced=route.get("balanced"), one_ray=route.get("one_ray"),
+               se_angular=options.get("se_angular"))
     if gradient:
-        _, s = _sensitivities(row, dict(preset=preset))
+        _, s = _sensitivities(row, options)
         _, s_ref = _sensitivities(row, reference_grid)
         out.update(value_error=out["error"], error=gradient_error(s, s_ref),
                    sensitivities=s.tolist(), reference_sensitivities=s_ref.tolist())
@@ -249,13 +261,15 @@ def _describe(row):
                  f"{row['exponent']:.3f}, knee {row['knee']:.3g}")
     else:
         text += f"correlation length {row['correlation_length']:.3f}"
-    return text + f", noise {row['noise']:.3g}"
+    text += f", noise {row['noise']:.3g}"
+    return text + (f", se_angular {row['se_angular']}" if row.get("se_angular") else "")
 
 
 def _family_flags(args):
     flags = "" if args.family == "seidel" else f" --family {args.family} --noll {args.noll}"
     flags += "" if args.signal == "markov" else f" --signal {args.signal}"
     flags += "" if args.noise is None else f" --noise {args.noise[0]:g} {args.noise[1]:g}"
+    flags += " --se-angular" if args.se_angular else ""
     return flags + (" --gradient" if args.gradient else "")
 
 
@@ -268,7 +282,7 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--start", type=json.loads, default=None,
                         help="climb from this design (JSON), see the module docstring")
-    parser.add_argument("--tag", default="", help="suffix of the results' name with --start")
+    parser.add_argument("--tag", default="", help="suffix of the results' name")
     parser.add_argument("--family", default="seidel", choices=("seidel", "zernike"))
     parser.add_argument("--noll", type=int, default=22,
                         help="highest Noll index of --family zernike (from 4)")
@@ -278,6 +292,9 @@ def main(argv=None):
     parser.add_argument("--noise", type=float, nargs=2, default=None, metavar=("LO", "HI"),
                         help="draw the noise variance as 10^uniform(LO, HI) instead of "
                              "10^uniform(-5, -2) (module docstring)")
+    parser.add_argument("--se-angular", action="store_true",
+                        help="run the preset with se_angular=se_angular_for(u, signal, noise), "
+                             "as optimise does for 'high' (module docstring)")
     args = parser.parse_args(argv)
     noise = (-5.0, -2.0) if args.noise is None else tuple(args.noise)
     noise_floor = min(1e-6, 10 ** noise[0])
@@ -290,11 +307,19 @@ def main(argv=None):
         # references have more (2560 angular since session 85, which tried 1920 in "high").
         reference_grid = dict(reference_grid, se_nodes=(8000, 2560))
         finer_grid = dict(finer_grid, se_nodes=(9600, 3200))
+    if args.se_angular:
+        # se_angular_for gives up to SE_ANGULAR_BY_SNR's last count: the references have
+        # 4/3 and 2 times that (session 86; memory is no bar since the fine stage's blocks
+        # are rematerialised in reverse mode).
+        most = jj.SE_ANGULAR_BY_SNR[-1][1]
+        reference_grid = dict(reference_grid, se_nodes=(8000, most * 4 // 3))
+        finer_grid = dict(finer_grid, se_nodes=(9600, 2 * most))
     start = time.perf_counter()
     sample = []
     for i in range(args.designs):
         row = _evaluate(_random_row(rng, args.family, args.signal, args.noll, noise),
-                        args.preset, reference_grid, args.gradient, snr_bound)
+                        args.preset, reference_grid, args.gradient, snr_bound,
+                        args.se_angular)
         if row is not None:
             sample.append(dict(row, design=i))
     worst = max((r["error"] for r in sample), default=float("nan"))
@@ -303,13 +328,13 @@ def main(argv=None):
     starts = sorted(sample, key=lambda r: -r["error"])[:args.starts]
     if args.start is not None:
         starts = [dict(_evaluate(args.start, args.preset, reference_grid, args.gradient,
-                                 snr_bound), design="given")]
+                                 snr_bound, args.se_angular), design="given")]
     climbs = []
     for row in starts:
         best, improved = row, 0
         for _ in range(args.steps):
             candidate = _evaluate(_step(best, rng, noise_floor), args.preset, reference_grid,
-                                  args.gradient, snr_bound)
+                                  args.gradient, snr_bound, args.se_angular)
             if candidate is not None and candidate["error"] > best["error"]:
                 best, improved = candidate, improved + 1
         finer = float(jj.jmse(*_design(best), **finer_grid))
@@ -353,8 +378,9 @@ def main(argv=None):
     name += "" if args.family == "seidel" else f"_{args.family}"
     name += "" if args.signal == "markov" else f"_{args.signal}"
     name += "" if args.noise is None else "_lownoise"
+    name += "_se_angular" if args.se_angular else ""
     name += "_gradient" if args.gradient else ""
-    name += "" if args.start is None else "_given" + args.tag
+    name += ("" if args.start is None else "_given") + args.tag
     common.write_report(name, dict(machine=common.machine_info(), preset=args.preset,
                                    family=args.family, signal=args.signal,
                                    reference=reference_grid, finer=finer_grid, sample=sample,

@@ -35,6 +35,7 @@ from ._merit import (
     HIGH_STRONG_STRENGTH as HIGH_STRONG_STRENGTH,
     OVERLAP_FLOOR as OVERLAP_FLOOR,
     PRESETS as PRESETS,
+    SE_ANGULAR_BY_SNR as SE_ANGULAR_BY_SNR,
     STEEP_SLOPE as STEEP_SLOPE,
     WEAK_TIER_SNR as WEAK_TIER_SNR,
     TierShortcut as TierShortcut,
@@ -42,6 +43,7 @@ from ._merit import (
     baseline_jmse as baseline_jmse,
     jmse as jmse,
     jmse_options as jmse_options,
+    se_angular_for as se_angular_for,
 )
 from ._optimise import (
     OptimisationResult as OptimisationResult,

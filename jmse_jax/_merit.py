@@ -53,6 +53,7 @@ __all__ = [
     "DEFAULT_TIERS",
     "OVERLAP_FLOOR",
     "PRESETS",
+    "SE_ANGULAR_BY_SNR",
     "TierShortcut",
     "CHECKED_SNR",
     "CHECKED_SNR_PEAKS",
@@ -78,6 +79,7 @@ __all__ = [
     "baseline_jmse",
     "jmse",
     "jmse_options",
+    "se_angular_for",
 ]
 
 #: Largest Nyquist ratio accepted: at u = 1.5 the band's corners lie past the cutoff.
@@ -154,8 +156,10 @@ CHECKED_SNR = 2e6
 #: balanced grid), where ``S_e`` turns from ``S_n / |H|^2`` to ``S_x`` along curves
 #: narrower than its 960 angular fine nodes (``HIGH_STEEP_GRID``'s counts there: 2.0e-2;
 #: with 1920 angular nodes 8.7e-3, 3840 1.9e-5; the count needed grows with the ratio, and
-#: doubling it costs every ``"high"`` design half its time again), so ``optimise``,
-#: which follows the gradient, warns past ``CHECKED_SNR`` even with ``"high"``.
+#: doubling it costs every ``"high"`` design half its time again). Since session 86
+#: ``optimise``, which follows the gradient, gives ``"high"`` the count the ratio needs
+#: (``se_angular``, ``SE_ANGULAR_BY_SNR``), and warns past ``CHECKED_SNR`` when told to
+#: take fewer.
 CHECKED_SNR_PEAKS = 2e8
 #: Largest ``S_x / S_n`` on the innermost ring where the OTF can vanish (``_ring_snr``) at
 #: which the default's two weakest tiers are used: a design above the first bound skips
@@ -566,11 +570,13 @@ PRESETS: dict[str, dict] = {
         quadrature="polar", nodes=(24, 16), se_nodes=(800, 48), otf_method="overlap",
         overlap_nodes=(28, 16), tiers=None, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=None, steep=None, ray=None,
+        se_angular=None,
     ),
     "default": dict(
         quadrature="polar", nodes=(40, 20), se_nodes=(2400, 160), otf_method="overlap",
         overlap_nodes=(28, 24), tiers=DEFAULT_TIERS, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=BALANCED_GRID, steep=None, ray=None,
+        se_angular=None,
     ),
     # 80 radial OTF nodes for H's (1 - r)^(3/2) edge on bands that reach the cutoff, 2800
     # radial S_e nodes for the ridges along the OTF's zeros at high SNR; each count differs
@@ -580,7 +586,7 @@ PRESETS: dict[str, dict] = {
         quadrature="polar", nodes=(80, 40), se_nodes=(2800, 960), otf_method="overlap",
         overlap_nodes=(48, 48), tiers=None, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=True, balanced=HIGH_BALANCED_GRID,
-        steep=HIGH_STEEP_GRID, ray=HIGH_RAY_GRID,
+        steep=HIGH_STEEP_GRID, ray=HIGH_RAY_GRID, se_angular=None,
     ),
 }
 
@@ -631,6 +637,19 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
         check_count("nodes", nodes)
         options["nodes"] = int(nodes)
         options["se_nodes"] = None
+    if options["se_angular"] is not None:
+        check_count("se_angular", options["se_angular"])
+        options["se_angular"] = int(options["se_angular"])
+        if options["tiers"] is not None:
+            raise ValueError(
+                f"se_angular applies to fixed grids and their branches (preset='high' or "
+                f"'fast', or grid options of your own), not to the default's tiers, whose "
+                f"counts are calibrated together with their shortcuts; got "
+                f"se_angular={options['se_angular']} with preset={preset!r}")
+        if options["se_nodes"] is None:
+            raise ValueError(
+                f"se_angular needs the polar rule's fine S_e nodes (quadrature='polar' with "
+                f"se_nodes), got quadrature={options['quadrature']!r}")
     return options
 
 
@@ -899,13 +918,29 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(
     if n_blocks == 1:
         (total, back), _ = block(carry, tuple(a[0] for a in rows))
     else:
-        (total, back), _ = jax.lax.scan(block, carry, rows)
+        # Without the adjoint this total may be differentiated by ordinary means (``u`` and
+        # the spectra): its blocks are rematerialised then (``_FINE_REMAT``).
+        (total, back), _ = jax.lax.scan(block if adjoint else _FINE_REMAT(block), carry, rows)
     if not adjoint:
         return total
     l_r = jnp.asarray(l_r, dtype)
     back = jnp.transpose(back, (1, 2, 0, 3))  # (re/im, triangles, coarse rows, n_r)
     return total, jax.lax.complex(jnp.matmul(back[0], l_r, precision=EXACT),
                                   jnp.matmul(back[1], l_r, precision=EXACT))
+
+
+#: How the fine stage's blocks run when the total is differentiated by ordinary means (the
+#: tangents of ``u`` and the spectra, ``_fine_stage_jvp``): rematerialised, so that reverse
+#: mode stores each block's inputs and recomputes the block in the backward pass, instead
+#: of keeping every block's fine-grid intermediates. Before session 86 a ``value_and_grad``
+#: in ``u`` and the noise held them all: at the Fig. 1 point (one core) the default's
+#: scratch was 455 MB and it took 6.4 ms, ``"high"``'s 1065 MB and 689 ms; now 27 MB and
+#: 4.3 ms, 72 MB and 347 ms (XLA's CPU runtime maps scratch above about 32 MB afresh on
+#: every call and pays a page fault per 4 kB), and the scratch no longer grows with the
+#: fine nodes (``"high"``'s balanced grid with 3840 angular ones: 3.1 GB -> 0.3 GB). The
+#: gradient is the same to the last bit. A gradient in the coefficients alone never came
+#: here (``_fine_stage``'s adjoint).
+_FINE_REMAT = jax.checkpoint
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5, 6, 7))
@@ -919,7 +954,7 @@ def _fine_stage(h_coarse, u, signal, noise, coarse, fine, dtype, ridges):
     of MB; XLA's CPU runtime maps scratch above about 32 MB afresh on every call and pays a
     page fault per 4 kB), and its backward pass is a product with ``G``. Tangents of ``u``
     and the spectra go through an ordinary forward-mode derivative, only when they are not
-    symbolic zeros.
+    symbolic zeros, with the blocks rematerialised in reverse mode (``_FINE_REMAT``).
     """
     return _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, False, ridges=ridges)
 
@@ -1778,6 +1813,7 @@ def jmse(
     overlap_floor: int | None = None,
     B: int | None = None,
     peaks: bool | None = None,
+    se_angular: int | None = None,
 ):
     """Predicted mean-squared error after Wiener restoration (JMSE), Berkner & Shroff Eq. (7).
 
@@ -1868,6 +1904,16 @@ def jmse(
         ``peaks=True`` keeps the default's tiers (their own grids take it, the shortcuts'
         first and check grids do not), and their noise bound ``CHECKED_SNR``: off the axis
         under flat spectra the steep tier, which has the peaks, was 4.7e-4 off beyond it.
+    se_angular : int or None
+        At least this many angular fine S_e nodes in every polar grid the call may take
+        (``"high"``'s own, balanced and steep grids; a grid of your own), without fixing
+        the grid: the preset's branches and one-ray plans stay. For gradients at high SNR
+        under flat signal spectra, where ``S_e`` turns from ``S_n / |H|^2`` to ``S_x``
+        along curves that the rays cross obliquely: at peak ratios 2e6-2e8 ``"high"``'s
+        960 were up to 1e-1 off in the gradient while its value held 1e-6
+        (``se_angular_for`` gives a count checked there; ``optimise`` takes it by
+        itself). Time grows with it (TIMING), memory hardly (the fine stage runs in
+        blocks). Not with the default's tiers (``ValueError``).
 
     Returns
     -------
@@ -1914,7 +1960,7 @@ def jmse(
         (aberrations, field, u, signal, noise),
         jmse_options(preset, quadrature=quadrature, nodes=nodes, se_nodes=se_nodes,
                      otf_method=otf_method, overlap_nodes=overlap_nodes,
-                     overlap_floor=overlap_floor, B=B, peaks=peaks))
+                     overlap_floor=overlap_floor, B=B, peaks=peaks, se_angular=se_angular))
     if is_concrete(inputs):
         # A preset's grids on a design stronger than they were checked at: a warning (the
         # grid options, when given, are the user's own sizing).
@@ -2024,7 +2070,17 @@ def _base_plans(static, aberrations=None):
             balanced = {**balanced, **DEGREE_OVERLAP, "nodes": DEGREE_NODES,
                         "se_nodes": DEGREE_SE_NODES}
         plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
+    if options.get("se_angular") is not None:
+        plans = tuple((_with_se_angular(plan, options["se_angular"]), shortcut)
+                      for plan, shortcut in plans)
     return plans
+
+
+def _with_se_angular(plan, se_angular):
+    """``plan`` with at least ``se_angular`` angular fine S_e nodes (``jmse``'s
+    ``se_angular``; the tiers' shortcuts never reach here, ``jmse_options``)."""
+    radial, angular = plan["se_nodes"]
+    return {**plan, "se_nodes": (radial, max(angular, se_angular))}
 
 
 def _degree_program(aberrations):
@@ -2215,25 +2271,68 @@ def _snr_peaks(peaks, tiers) -> bool:
     return bool(peaks) and tiers is None
 
 
-def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient=False):
+#: The angular counts of fine S_e nodes (``jmse``'s ``se_angular``) that hold ``"high"``'s
+#: gradient off the axis up to each peak ``S_x / S_n``, as ``(bound, count)`` pairs:
+#: ``se_angular_for``. Under flat signal spectra at high SNR ``S_e`` turns from
+#: ``S_n / |H|^2`` to ``S_x`` along curves that the rays cross obliquely, narrower as the
+#: SNR grows, and the gradient's integrand (the turn's derivative) is a ridge along them.
+#: Calibrated in session 86 (``benchmarks/se_angular.py``) on the two designs where
+#: session 85's climbs found ``"high"``'s 960 far off, against 11520 angular nodes. On the
+#: balanced one (strength 11.7, u 0.93): at a peak ratio of 2e7 960 leave 5.4e-3, 1920
+#: 6.3e-6; at 6e7 1920 7.4e-4, 2880 1.4e-5, 3840 8.6e-7; at 1.3e8 3840 5.3e-5, 5760
+#: 5.0e-8; at 2e8 3840 2.8e-4, 4800 1.8e-5, 5760 1.6e-6. On the steep one (strength 12,
+#: u 0.85, 1.9e8): 960 5.8e-3, 1920 1.3e-4, 3840 4.7e-7. The values hold either way (1e-6).
+#: With the blocks of the fine stage rematerialised (``_FINE_REMAT``) the count costs time,
+#: not memory.
+SE_ANGULAR_BY_SNR = ((CHECKED_SNR, 960), (2e7, 1920), (6e7, 3840), (CHECKED_SNR_PEAKS, 5760))
+
+
+def _se_angular_for_snr(snr) -> int:
+    """``SE_ANGULAR_BY_SNR``'s count for the peak ratio ``snr`` (its last beyond it)."""
+    for bound, count in SE_ANGULAR_BY_SNR:
+        if snr <= bound:
+            return count
+    return SE_ANGULAR_BY_SNR[-1][1]
+
+
+def se_angular_for(u, signal, noise) -> int:
+    """The ``se_angular`` (``jmse``'s option) that holds ``preset="high"``'s gradient off
+    the axis at the peak ``S_x / S_n`` of these spectra over the band of ``u``
+    (``SE_ANGULAR_BY_SNR``): 960, ``"high"``'s own, up to ``CHECKED_SNR``, more beyond.
+    ``optimise`` takes it by itself for ``"high"``; give it to ``jax.grad(jmse)`` calls of
+    your own at low noise, as ``jmse(..., preset="high", se_angular=se_angular_for(u,
+    signal, noise))``. Its values are held to ``CHECKED_SNR_PEAKS`` whatever the count."""
+    check_range("u", u, 0.0, U_MAX, low_inclusive=False)
+    if not isinstance(signal, AbstractSignal):
+        raise TypeError(f"signal must be a jmse_jax signal model, got {type(signal)}")
+    if not isinstance(noise, AbstractNoise):
+        raise TypeError(f"noise must be a jmse_jax noise model, got {type(noise)}")
+    return _se_angular_for_snr(float(_peak_snr(u, signal, noise)))
+
+
+def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient=False,
+                             se_angular=None):
     """A ``UserWarning`` when the concrete spectra's peak ``S_x / S_n`` exceeds
     ``CHECKED_SNR`` (for calls with a preset's grids), or ``CHECKED_SNR_PEAKS`` with the
     closed-form peaks (``peaks``: ``_snr_peaks`` of the options, or a one-ray plan).
     ``gradient`` (``optimise``, which follows the gradient): with the peaks, a warning
-    between the two bounds too, since ``"high"``'s gradient was checked off the axis only
-    to ``CHECKED_SNR``."""
+    between the two bounds too unless ``se_angular`` (the option) is at least
+    ``se_angular_for``'s count, since ``"high"``'s own 960 angular fine nodes hold its
+    gradient off the axis only to ``CHECKED_SNR``."""
     snr = float(_peak_snr(u, signal, noise))
-    if peaks and gradient and CHECKED_SNR < snr <= CHECKED_SNR_PEAKS:
+    if (peaks and gradient and CHECKED_SNR < snr <= CHECKED_SNR_PEAKS
+            and (se_angular or 0) < _se_angular_for_snr(snr)):
         warnings.warn(
             f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
-            f"gradients of the polar grids were checked at off the axis ({CHECKED_SNR:.0e}; "
-            f"the values of preset='high' hold to {CHECKED_SNR_PEAKS:.0e}): under a flat "
-            f"signal spectrum S_e turns from S_n/|H|^2 to S_x along narrow curves, and the "
-            f"gradient the optimiser follows may be off by percents where the value is "
-            f"right (preset='high' at 1.3e8: value 9e-7, gradient 1e-1; "
-            f"benchmarks/default_climb.py --preset high --gradient --noise). Give finer "
-            f"se_nodes (the angular count: 3840 held that design to 2e-5) and compare two "
-            f"of them",
+            f"gradients of the polar grids were checked at off the axis with "
+            f"se_angular={se_angular} ({CHECKED_SNR:.0e} with preset='high''s own 960; its "
+            f"values hold to {CHECKED_SNR_PEAKS:.0e}): under a flat signal spectrum S_e "
+            f"turns from S_n/|H|^2 to S_x along narrow curves, and the gradient the "
+            f"optimiser follows may be off by percents where the value is right "
+            f"(preset='high' at 2e8: value 1e-6, gradient 1e-1; "
+            f"benchmarks/default_climb.py --preset high --gradient --noise). Give "
+            f"se_angular={_se_angular_for_snr(snr)} (jmse_options; jmse_jax.se_angular_for), "
+            f"which optimise takes by itself when se_angular is not given",
             UserWarning, stacklevel=stacklevel)
         return
     if peaks:

@@ -28,6 +28,7 @@ from ._merit import (
     _warn_beyond_checked_snr,
     jmse,
     jmse_options as _full_jmse_options,
+    se_angular_for,
 )
 from ._numerics import all_finite, check_choice, check_count, check_range, is_concrete
 from ._spectra import AbstractNoise, AbstractSignal, MarkovSignal, WhiteNoise
@@ -152,6 +153,29 @@ def lens_merit(
     )
 
 
+def _with_gradient_se_angular(jmse_options, u, signal, noise):
+    """``jmse_options`` with ``se_angular`` from ``se_angular_for`` where ``optimise``'s
+    gradient needs more angular fine S_e nodes than the preset's: ``"high"`` (the peaks
+    without the default's tiers) at a concrete peak ``S_x / S_n`` beyond ``CHECKED_SNR``,
+    with neither ``se_angular`` nor grid options given. Anything else (bad arguments
+    included, which the checks then refuse) is returned as it is."""
+    if (jmse_options is None or not isinstance(jmse_options, dict)
+            or "se_angular" in jmse_options
+            or any(key in jmse_options for key in _GRID_OPTIONS)
+            or not isinstance(signal, AbstractSignal) or not isinstance(noise, AbstractNoise)
+            or not is_concrete((u, signal, noise))):
+        return jmse_options
+    try:
+        options = _full_jmse_options(**jmse_options)
+        count = se_angular_for(u, signal, noise)
+    except (TypeError, ValueError):
+        return jmse_options  # refused with its own message by the checks that follow
+    if (not _snr_peaks(options["peaks"], options["tiers"]) or options["se_nodes"] is None
+            or count <= options["se_nodes"][1]):
+        return jmse_options
+    return {**jmse_options, "se_angular": count}
+
+
 def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavelengths,
                            jmse_options, gradient=False):
     """Checks of the arguments ``lens_merit`` and ``optimise`` share; returns ``fields``,
@@ -173,7 +197,7 @@ def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavel
         options = _full_jmse_options(**(jmse_options or {}))
         _warn_beyond_checked_snr(u, signal, noise, stacklevel=4,
                                  peaks=_snr_peaks(options["peaks"], options["tiers"]),
-                                 gradient=gradient)
+                                 gradient=gradient, se_angular=options["se_angular"])
     check_range("fields", fields, 0.0, 1.0)
     fields = jnp.asarray(fields, dtype)
     if fields.ndim != 1 or fields.shape[0] == 0:
@@ -600,7 +624,12 @@ def optimise(
         paper's singlet it reaches the optimum of ``preset="default"`` to 2e-7 in the
         parameters and 2e-8 in the JMSE (``benchmarks/optimise_singlet.py``, 2026-12-03),
         with a first call of 10 s against 81 s on a 2-core CPU (compilation included; later
-        starts take about a second either way). Pass ``{}`` for the default preset.
+        starts take about a second either way). Pass ``{}`` for the default preset. With
+        ``"high"`` at a peak ``S_x / S_n`` beyond ``CHECKED_SNR`` (2e6) and neither
+        ``se_angular`` nor grid options given, ``se_angular=se_angular_for(u, signal,
+        noise)`` is added (up to 5760 angular fine S_e nodes at 2e8, where ``"high"``'s own
+        960 left the gradient up to 1e-1 off under flat spectra); the result's
+        ``jmse_options`` show it.
     f_number : float, optional
         Solve the last curvature at every step so the working F-number stays at this value
         (Zemax's F-number solve; the paper's "F/4.6 singlet"). Do not also vary that
@@ -663,6 +692,8 @@ def optimise(
             raise ValueError(f"scales names {name!r}, which is not among variables {variables}")
         check_range(f"scales[{name!r}]", scales[name], 0.0, None, low_inclusive=False)
     dtype = lens.ep_radius.dtype
+    if merit == "jmse":
+        jmse_options = _with_gradient_se_angular(jmse_options, u, signal, noise)
     fields, field_weights, wavelengths = _check_merit_arguments(
         dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options,
         gradient=True)

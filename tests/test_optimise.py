@@ -365,8 +365,10 @@ def test_noise_beyond_the_checked_snr_warns_in_lens_merit_and_optimise():
                 fn(**noisy, jmse_options={"se_nodes": (800, 96), "nodes": (24, 12)})
             with pytest.raises(ValueError, match="fields must be in"):
                 fn(**{**noisy, "noise": jmse_jax.WhiteNoise(1e-4)})  # 1.6e6
-    # "high"'s values hold to CHECKED_SNR_PEAKS, its gradients off the axis only to
-    # CHECKED_SNR (session 85's climbs): at 1.6e8 optimise warns and lens_merit does not.
+    # "high"'s values hold to CHECKED_SNR_PEAKS, its gradients off the axis with its own
+    # 960 angular fine nodes only to CHECKED_SNR (session 85's climbs): at 1.6e8 lens_merit
+    # does not warn, and optimise warns when told to keep 960 (it otherwise takes more by
+    # itself, tests/test_se_angular.py).
     high = dict(noisy, noise=jmse_jax.WhiteNoise(1e-6), jmse_options={"preset": "high"})
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -375,4 +377,5 @@ def test_noise_beyond_the_checked_snr_warns_in_lens_merit_and_optimise():
     with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+08 is beyond what the gradients "
                                          r"of the polar grids were checked at off the axis"):
         with pytest.raises(ValueError, match="fields must be in"):
-            optimise(lens, ("image_shift",), **high)
+            optimise(lens, ("image_shift",),
+                     **dict(high, jmse_options={"preset": "high", "se_angular": 960}))

@@ -1,0 +1,174 @@
+"""``jmse``'s ``se_angular`` option, ``se_angular_for`` and ``optimise``'s own choice of it.
+
+``se_angular`` raises the angular count of fine S_e nodes in every polar grid a preset may
+take without fixing the grid (its branches and one-ray plans stay). The oracle here is the
+same grid given explicitly: ``preset="fast", se_angular=n`` must be ``fast``'s grid with
+``se_nodes=(800, n)``, value and gradient. The count's calibration against converged grids
+(``"high"`` at peak ratios 2e6-2e8) is too heavy for the suite: ``benchmarks/default_climb.py
+--preset high --gradient --noise``.
+"""
+
+import warnings
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import jmse_jax as jj  # noqa: E402
+from jmse_jax._merit import (  # noqa: E402
+    CHECKED_SNR,
+    CHECKED_SNR_PEAKS,
+    HIGH_RAY_GRID,
+    PRESETS,
+    _base_plans,
+    _prepare,
+    _radial_plans,
+    _tier_plans_of,
+)
+from jmse_jax._optimise import _with_gradient_se_angular  # noqa: E402
+
+FIG1 = dict(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198)
+FAST = PRESETS["fast"]
+#: ``fast``'s grid given explicitly, with the fine angular count left to the caller.
+FAST_GRID = dict(nodes=FAST["nodes"], overlap_nodes=FAST["overlap_nodes"],
+                 overlap_floor=FAST["overlap_floor"], peaks=False)
+
+
+def _design(noise=1e-4, field=0.95):
+    return (jj.Seidel(**FIG1), field, 0.2, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(noise))
+
+
+def test_se_angular_is_the_preset_grid_with_more_angular_fine_nodes():
+    """Value and gradient of ``fast`` with ``se_angular=96`` are those of ``fast``'s grid
+    given with ``se_nodes=(800, 96)`` (to rounding); on a grid of the caller's own too."""
+    design = _design()
+    own = float(jj.jmse(*design, preset="fast"))
+    raised = float(jj.jmse(*design, preset="fast", se_angular=96))
+    explicit = float(jj.jmse(*design, se_nodes=(800, 96), **FAST_GRID))
+    assert raised == pytest.approx(explicit, rel=1e-13)
+    assert raised == pytest.approx(own, rel=1e-10)  # 48 angular nodes hold this design
+    # A grid of the caller's own, whose 8 angular fine nodes do not hold it: se_angular
+    # gives the finer grid's value.
+    coarse = dict(FAST_GRID, nodes=(24, 8))
+    values = [float(jj.jmse(*design, se_nodes=(800, 8), **coarse, **extra))
+              for extra in ({}, {"se_angular": 64})]
+    assert values[1] == pytest.approx(float(jj.jmse(*design, se_nodes=(800, 64), **coarse)),
+                                      rel=1e-13)
+    assert abs(values[1] / values[0] - 1.0) > 1e-8
+
+    def merit(c, u, **options):
+        return jj.jmse(jj.Seidel(*c), 0.95, u, design[3], design[4], **options)
+
+    c = jnp.array([FIG1[k] for k in ("w020", "w040", "w131", "w222", "w220")])
+    grad = jax.jit(jax.grad(lambda c, u: merit(c, u, preset="fast", se_angular=96),
+                            argnums=(0, 1)))(c, 0.2)
+    grad_explicit = jax.jit(jax.grad(lambda c, u: merit(c, u, se_nodes=(800, 96),
+                                                         **FAST_GRID),
+                                     argnums=(0, 1)))(c, 0.2)
+    np.testing.assert_allclose(np.asarray(grad[0]), np.asarray(grad_explicit[0]), rtol=1e-11)
+    assert float(grad[1]) == pytest.approx(float(grad_explicit[1]), rel=1e-11)
+
+
+def test_se_angular_below_the_preset_count_and_on_the_axis_changes_nothing():
+    """A count below the grid's own keeps it (``max``), and a design on the axis keeps its
+    one-ray plan (no angular nodes), whose value ``fast``'s ``se_angular`` leaves alone."""
+    design = _design()
+    assert float(jj.jmse(*design, preset="fast", se_angular=8)) == float(
+        jj.jmse(*design, preset="fast"))
+    on_axis = (jj.Seidel(w020=-1.5, w040=0.8),) + _design(field=0.0)[1:]
+    assert float(jj.jmse(*on_axis, preset="fast", se_angular=96)) == pytest.approx(
+        float(jj.jmse(*on_axis, preset="fast")), rel=1e-14)
+
+
+def test_se_angular_reaches_every_branch_of_high():
+    """``"high"``'s own, steep and balanced grids all get the count (the balanced one of a
+    Zernike design of high degree too, which replaces its S_e nodes by ``DEGREE_SE_NODES``);
+    the one-ray plan keeps ``HIGH_RAY_GRID``'s counts."""
+    for aberrations in (jj.Seidel(**FIG1), jj.Zernike([0.3, 0.2, 0.1], noll=(4, 11, 22))):
+        static, _ = _prepare((aberrations, 0.95, 0.2, jj.MarkovSignal(1.0, 5.0),
+                              jj.WhiteNoise(1e-4)),
+                             jj.jmse_options("high", se_angular=4800))
+        plans = _base_plans(static, aberrations)
+        assert len(plans) == 3  # own, steep, balanced
+        for plan, _ in plans:
+            assert plan["se_nodes"][1] == 4800
+        assert {plan["se_nodes"][0] for plan, _ in plans} == {
+            PRESETS["high"]["se_nodes"][0], jj.HIGH_STEEP_GRID["se_nodes"][0],
+            (jj.DEGREE_SE_NODES if isinstance(aberrations, jj.Zernike)
+             else jj.HIGH_BALANCED_GRID["se_nodes"])[0]}
+        (ray, _), = _radial_plans(_tier_plans_of(static, plans), static.value[6])[0]
+        assert ray["se_nodes"] == HIGH_RAY_GRID["se_nodes"]
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(preset="default", se_angular=1920), r"se_angular applies to fixed grids.*"
+                                              r"se_angular=1920 with preset='default'"),
+    (dict(preset="high", se_angular=0), r"se_angular must be"),
+    (dict(preset="high", se_angular=-5), r"se_angular must be"),
+    (dict(preset="fast", se_angular=2.5), r"se_angular must be"),
+    (dict(preset="high", quadrature="gauss", nodes=16, se_angular=96),
+     r"se_angular needs the polar rule.*quadrature='gauss'"),
+])
+def test_bad_se_angular_is_refused(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        jj.jmse(*_design(), **kwargs)
+
+
+def test_se_angular_for_follows_the_peak_snr():
+    """960 (``"high"``'s own) up to ``CHECKED_SNR``, the table's counts beyond, rising with
+    the ratio (MarkovSignal(1, 5): S_x(0) = 157.08, so the noise sets the ratio)."""
+    signal = jj.MarkovSignal(1.0, 5.0)
+    peak = float(signal(jnp.zeros(()), jnp.zeros(())))
+    assert peak == pytest.approx(157.08, rel=1e-4)
+    counts = [jj.se_angular_for(0.2, signal, jj.WhiteNoise(peak / ratio))
+              for ratio in (1e3, 0.99 * CHECKED_SNR, 1.01 * CHECKED_SNR, CHECKED_SNR_PEAKS)]
+    assert counts[:2] == [960, 960]
+    assert counts[2] > 960
+    assert counts[3] == jj.SE_ANGULAR_BY_SNR[-1][1]
+    assert counts == sorted(counts)
+    for (bound, count) in jj.SE_ANGULAR_BY_SNR:
+        assert jj.se_angular_for(0.2, signal, jj.WhiteNoise(peak / bound * 1.0001)) == count
+    with pytest.raises(ValueError, match="u must be"):
+        jj.se_angular_for(-0.1, signal, jj.WhiteNoise(1e-3))
+    with pytest.raises(TypeError, match="noise must be"):
+        jj.se_angular_for(0.2, signal, 1e-3)
+
+
+def test_optimise_takes_se_angular_for_high_beyond_the_checked_snr():
+    """``optimise`` (through ``_with_gradient_se_angular``) gives ``"high"`` the count of
+    ``se_angular_for`` past ``CHECKED_SNR``, and nothing else: not below it, not for the
+    default or ``fast``, not when the caller gave ``se_angular`` or a grid."""
+    signal = jj.MarkovSignal(1.0, 5.0)
+    low, high_snr = jj.WhiteNoise(1e-3), jj.WhiteNoise(1e-6)  # 1.6e5, 1.6e8
+    count = jj.se_angular_for(0.2, signal, high_snr)
+    assert count > 960
+    assert _with_gradient_se_angular({"preset": "high"}, 0.2, signal, high_snr) == {
+        "preset": "high", "se_angular": count}
+    for options in ({"preset": "fast"}, {}, None, {"preset": "high", "se_angular": 1920},
+                    {"preset": "high", "se_nodes": (2800, 960)}):
+        assert _with_gradient_se_angular(options, 0.2, signal, high_snr) == options
+    assert _with_gradient_se_angular({"preset": "high"}, 0.2, signal, low) == {"preset": "high"}
+
+
+def test_optimise_warns_for_high_only_with_too_few_angular_nodes():
+    """At a peak ratio of 1.6e8 ``optimise`` with ``"high"`` takes the count by itself and
+    does not warn; with ``se_angular=960`` given it warns and names the count. (A bad field
+    list stops each call after the checks, before anything is compiled.)"""
+    from jmse_jax.lens import paper_singlet
+
+    lens = paper_singlet(1.0, 0.05)
+    kwargs = dict(signal=jj.MarkovSignal(1.0, 5.0), noise=jj.WhiteNoise(1e-6), fields=(1.5,))
+    count = jj.se_angular_for(0.2, kwargs["signal"], kwargs["noise"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="fields must be in"):
+            jj.optimise(lens, ("image_shift",), jmse_options={"preset": "high"}, **kwargs)
+    with pytest.warns(UserWarning, match=rf"1\.57e\+08 .* with se_angular=960 .* Give "
+                                         rf"se_angular={count}"):
+        with pytest.raises(ValueError, match="fields must be in"):
+            jj.optimise(lens, ("image_shift",),
+                        jmse_options={"preset": "high", "se_angular": 960}, **kwargs)
