@@ -1912,7 +1912,8 @@ def jmse(
         along curves that the rays cross obliquely: at peak ratios 2e6-2e8 ``"high"``'s
         960 were up to 1e-1 off in the gradient while its value held 1e-6
         (``se_angular_for`` gives a count checked there; ``optimise`` takes it by
-        itself). Time grows with it (TIMING), memory hardly (the fine stage runs in
+        itself). Time grows with it (``"high"`` at the Fig. 1 point with 5760: value
+        and gradient about 3 times its own), memory hardly (the fine stage runs in
         blocks). Not with the default's tiers (``ValueError``).
 
     Returns
