@@ -2326,8 +2326,9 @@ def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient
         warnings.warn(
             f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
             f"gradients of the polar grids were checked at off the axis with "
-            f"se_angular={se_angular} ({CHECKED_SNR:.0e} with preset='high''s own 960; its "
-            f"values hold to {CHECKED_SNR_PEAKS:.0e}): under a flat signal spectrum S_e "
+            f"{max(se_angular or 0, 960)} angular fine S_e nodes ({CHECKED_SNR:.0e} with "
+            f"preset='high''s own 960; its values hold to {CHECKED_SNR_PEAKS:.0e}): under a "
+            f"flat signal spectrum S_e "
             f"turns from S_n/|H|^2 to S_x along narrow curves, and the gradient the "
             f"optimiser follows may be off by percents where the value is right "
             f"(preset='high' at 2e8: value 1e-6, gradient 1e-1; "

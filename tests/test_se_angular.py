@@ -167,8 +167,8 @@ def test_optimise_warns_for_high_only_with_too_few_angular_nodes():
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match="fields must be in"):
             jj.optimise(lens, ("image_shift",), jmse_options={"preset": "high"}, **kwargs)
-    with pytest.warns(UserWarning, match=rf"1\.57e\+08 .* with se_angular=960 .* Give "
-                                         rf"se_angular={count}"):
+    with pytest.warns(UserWarning, match=rf"1\.57e\+08 .* with 960 angular fine S_e nodes .* "
+                                         rf"Give se_angular={count}"):
         with pytest.raises(ValueError, match="fields must be in"):
             jj.optimise(lens, ("image_shift",),
                         jmse_options={"preset": "high", "se_angular": 960}, **kwargs)
