@@ -2280,9 +2280,9 @@ def _snr_peaks(peaks, tiers) -> bool:
 #: Calibrated in session 86 (``benchmarks/se_angular.py``) on the two designs where
 #: session 85's climbs found ``"high"``'s 960 far off, against 11520 angular nodes. On the
 #: balanced one (strength 11.7, u 0.93): at a peak ratio of 2e7 960 leave 5.4e-3, 1920
-#: 6.3e-6; at 6e7 1920 7.4e-4, 2880 1.4e-5, 3840 8.6e-7; at 1.3e8 3840 5.3e-5, 5760
+#: 6.3e-6; at 6e7 1920 7.4e-4, 2880 1.4e-5, 3840 8.6e-7; at 1.3e8 3840 5.2e-5, 5760
 #: 5.0e-8; at 2e8 3840 2.8e-4, 4800 1.8e-5, 5760 1.6e-6. On the steep one (strength 12,
-#: u 0.85, 1.9e8): 960 5.8e-3, 1920 1.3e-4, 3840 4.7e-7. The values hold either way (1e-6).
+#: u 0.85, 1.9e8): 960 5.8e-3, 1920 1.3e-4, 3840 4.7e-7. The values hold either way (2e-6).
 #: With the blocks of the fine stage rematerialised (``_FINE_REMAT``) the count costs time,
 #: not memory.
 SE_ANGULAR_BY_SNR = ((CHECKED_SNR, 960), (2e7, 1920), (6e7, 3840), (CHECKED_SNR_PEAKS, 5760))
