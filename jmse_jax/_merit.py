@@ -2285,7 +2285,8 @@ def _snr_peaks(peaks, tiers) -> bool:
 #: u 0.85, 1.9e8): 960 5.8e-3, 1920 1.3e-4, 3840 4.7e-7. The values hold either way (2e-6).
 #: With the blocks of the fine stage rematerialised (``_FINE_REMAT``) the count costs time,
 #: not memory.
-SE_ANGULAR_BY_SNR = ((CHECKED_SNR, 960), (2e7, 1920), (6e7, 3840), (CHECKED_SNR_PEAKS, 5760))
+SE_ANGULAR_BY_SNR = ((CHECKED_SNR, PRESETS["high"]["se_nodes"][1]), (2e7, 1920), (6e7, 3840),
+                     (CHECKED_SNR_PEAKS, 5760))
 
 
 def _se_angular_for_snr(snr) -> int:
@@ -2321,13 +2322,14 @@ def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient
     ``se_angular_for``'s count, since ``"high"``'s own 960 angular fine nodes hold its
     gradient off the axis only to ``CHECKED_SNR``."""
     snr = float(_peak_snr(u, signal, noise))
+    own = SE_ANGULAR_BY_SNR[0][1]  # "high"'s own count, which holds to CHECKED_SNR
     if (peaks and gradient and CHECKED_SNR < snr <= CHECKED_SNR_PEAKS
             and (se_angular or 0) < _se_angular_for_snr(snr)):
         warnings.warn(
             f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
             f"gradients of the polar grids were checked at off the axis with "
-            f"{max(se_angular or 0, 960)} angular fine S_e nodes ({CHECKED_SNR:.0e} with "
-            f"preset='high''s own 960; its values hold to {CHECKED_SNR_PEAKS:.0e}): under a "
+            f"{max(se_angular or 0, own)} angular fine S_e nodes ({CHECKED_SNR:.0e} with "
+            f"preset='high''s own {own}; its values hold to {CHECKED_SNR_PEAKS:.0e}): under a "
             f"flat signal spectrum S_e "
             f"turns from S_n/|H|^2 to S_x along narrow curves, and the gradient the "
             f"optimiser follows may be off by percents where the value is right "
