@@ -13,7 +13,8 @@ the field, ``u`` and the noise) of ``jmse(..., preset="high", se_angular=n)`` fo
 nodes (11520 by default; every other count as ``"high"``'s, which session 85 found not to
 bind). That calibrated ``SE_ANGULAR_BY_SNR`` (session 86). ``--timing`` instead times
 ``"high"`` with each count at the paper's Fig. 1 point (value, ``value_and_grad`` in the
-coefficients, and in the coefficients, ``u`` and the noise), warm and jitted.
+coefficients, and in the coefficients, ``u`` and the noise), warm and jitted, and with two
+of the counts given as ``grad_se_angular`` (the gradient's alone; session 87).
 
 Usage (from the repository root; about 25 min on 2 cores; the timing about 10 min, run it
 on a quiet machine)::
@@ -104,29 +105,36 @@ def calibrate(reference):
     return rows
 
 
-def timing(counts=(960, 1920, 3840, 5760)):
-    """Warm jitted times of ``"high"`` with each count at the Fig. 1 point."""
+def timing(counts=(960, 1920, 3840, 5760), gradient_only=(1920, 5760)):
+    """Warm jitted times of ``"high"`` with each count at the Fig. 1 point; for the counts
+    ``gradient_only`` also with the count given as ``grad_se_angular`` (the gradient's
+    alone, the value on ``"high"``'s own 960: what ``jmse`` takes by itself under
+    differentiation at low noise, session 87)."""
     c0 = jnp.array([common.FIG1[k] for k in dc.TERMS])
 
-    def merit(c, u, noise, n):
+    def merit(c, u, noise, n, option):
         return jj.jmse(jj.Seidel(*c), common.FIG1_FIELD, u, common.fig1_signal(),
-                       jj.WhiteNoise(noise), preset="high", se_angular=n)
+                       jj.WhiteNoise(noise), preset="high", **{option: n})
 
     args = (c0, jnp.asarray(common.FIG1_U), jnp.asarray(1e-3))
     out = []
-    for n in counts:
-        for mode, fn in (
-                ("value", lambda c, u, s, n=n: merit(c, u, s, n)),
-                ("value_and_grad (coefficients)",
-                 jax.value_and_grad(lambda c, u, s, n=n: merit(c, u, s, n))),
-                ("value_and_grad (coefficients, u, noise)",
-                 jax.value_and_grad(lambda c, u, s, n=n: merit(c, u, s, n),
-                                    argnums=(0, 1, 2)))):
+    runs = [(n, "se_angular") for n in counts] + [(n, "grad_se_angular")
+                                                  for n in gradient_only]
+    for n, option in runs:
+        modes = (
+            ("value", lambda c, u, s, n=n, o=option: merit(c, u, s, n, o)),
+            ("value_and_grad (coefficients)",
+             jax.value_and_grad(lambda c, u, s, n=n, o=option: merit(c, u, s, n, o))),
+            ("value_and_grad (coefficients, u, noise)",
+             jax.value_and_grad(lambda c, u, s, n=n, o=option: merit(c, u, s, n, o),
+                                argnums=(0, 1, 2))))
+        for mode, fn in modes[option == "grad_se_angular":]:
             timed = common.time_compiled(fn, args)
             seconds, compile_s = timed["warm_s"], timed["compile_s"]
-            out.append(dict(se_angular=n, mode=mode, seconds=seconds, compile_s=compile_s,
+            out.append(dict(option=option, se_angular=n, mode=mode, seconds=seconds,
+                            compile_s=compile_s,
                             scratch_mb=(timed["temp_bytes"] or 0) / 1e6))
-            print(f"se_angular {n} {mode}: {seconds * 1e3:.1f} ms, compile {compile_s:.1f} s, "
+            print(f"{option} {n} {mode}: {seconds * 1e3:.1f} ms, compile {compile_s:.1f} s, "
                   f"scratch {out[-1]['scratch_mb']:.0f} MB", flush=True)
     return out
 
@@ -146,10 +154,12 @@ def main(argv=None):
                  common.machine_line(machine, common.load_average()), "",
                  "Fig. 1 point, `high`, warm and jitted (`_common.time_compiled`: median), "
                  "float64:", "",
-                 "| se_angular | call | time | compile | scratch |", "|---|---|---|---|---|"]
+                 "| option | count | call | time | compile | scratch |",
+                 "|---|---|---|---|---|---|"]
         for t in times:
-            lines.append(f"| {t['se_angular']} | {t['mode']} | {t['seconds'] * 1e3:.1f} ms | "
-                         f"{t['compile_s']:.1f} s | {t['scratch_mb']:.0f} MB |")
+            lines.append(f"| {t['option']} | {t['se_angular']} | {t['mode']} | "
+                         f"{t['seconds'] * 1e3:.1f} ms | {t['compile_s']:.1f} s | "
+                         f"{t['scratch_mb']:.0f} MB |")
         print("\n".join(lines))
         common.write_report("se_angular_timing", dict(machine=machine, timing=times), lines)
         return

@@ -159,7 +159,9 @@ CHECKED_SNR = 2e6
 #: doubling it costs every ``"high"`` design half its time again). Since session 86
 #: ``optimise``, which follows the gradient, gives ``"high"`` the count the ratio needs
 #: (``se_angular``, ``SE_ANGULAR_BY_SNR``), and warns past ``CHECKED_SNR`` when told to
-#: take fewer.
+#: take fewer. Since session 87 so does ``jmse`` under differentiation, for the gradient
+#: alone, where ``u`` and the spectra are concrete (``grad_se_angular``), and it warns at
+#: run time where they are traced.
 CHECKED_SNR_PEAKS = 2e8
 #: Largest ``S_x / S_n`` on the innermost ring where the OTF can vanish (``_ring_snr``) at
 #: which the default's two weakest tiers are used: a design above the first bound skips
@@ -570,13 +572,13 @@ PRESETS: dict[str, dict] = {
         quadrature="polar", nodes=(24, 16), se_nodes=(800, 48), otf_method="overlap",
         overlap_nodes=(28, 16), tiers=None, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=None, steep=None, ray=None,
-        se_angular=None,
+        se_angular=None, grad_se_angular=None,
     ),
     "default": dict(
         quadrature="polar", nodes=(40, 20), se_nodes=(2400, 160), otf_method="overlap",
         overlap_nodes=(28, 24), tiers=DEFAULT_TIERS, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=BALANCED_GRID, steep=None, ray=None,
-        se_angular=None,
+        se_angular=None, grad_se_angular=None,
     ),
     # 80 radial OTF nodes for H's (1 - r)^(3/2) edge on bands that reach the cutoff, 2800
     # radial S_e nodes for the ridges along the OTF's zeros at high SNR; each count differs
@@ -587,6 +589,7 @@ PRESETS: dict[str, dict] = {
         overlap_nodes=(48, 48), tiers=None, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=True, balanced=HIGH_BALANCED_GRID,
         steep=HIGH_STEEP_GRID, ray=HIGH_RAY_GRID, se_angular=None,
+        grad_se_angular=None,
     ),
 }
 
@@ -637,18 +640,20 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
         check_count("nodes", nodes)
         options["nodes"] = int(nodes)
         options["se_nodes"] = None
-    if options["se_angular"] is not None:
-        check_count("se_angular", options["se_angular"])
-        options["se_angular"] = int(options["se_angular"])
+    for name in ("se_angular", "grad_se_angular"):
+        if options[name] is None:
+            continue
+        check_count(name, options[name])
+        options[name] = int(options[name])
         if options["tiers"] is not None:
             raise ValueError(
-                f"se_angular applies to fixed grids and their branches (preset='high' or "
+                f"{name} applies to fixed grids and their branches (preset='high' or "
                 f"'fast', or grid options of your own), not to the default's tiers, whose "
                 f"counts are calibrated together with their shortcuts; got "
-                f"se_angular={options['se_angular']} with preset={preset!r}")
+                f"{name}={options[name]} with preset={preset!r}")
         if options["se_nodes"] is None:
             raise ValueError(
-                f"se_angular needs the polar rule's fine S_e nodes (quadrature='polar' with "
+                f"{name} needs the polar rule's fine S_e nodes (quadrature='polar' with "
                 f"se_nodes), got quadrature={options['quadrature']!r}")
     return options
 
@@ -1814,6 +1819,7 @@ def jmse(
     B: int | None = None,
     peaks: bool | None = None,
     se_angular: int | None = None,
+    grad_se_angular: int | None = None,
 ):
     """Predicted mean-squared error after Wiener restoration (JMSE), Berkner & Shroff Eq. (7).
 
@@ -1915,6 +1921,19 @@ def jmse(
         itself). Time grows with it (``"high"`` at the Fig. 1 point with 5760: value
         and gradient about 3 times its own), memory hardly (the fine stage runs in
         blocks). Not with the default's tiers (``ValueError``).
+    grad_se_angular : int or None
+        ``se_angular`` for derivatives alone: differentiated (``jax.grad``, ``jvp``),
+        ``jmse`` returns the gradient of the grid with at least this many angular fine
+        S_e nodes and the value of its own grid, so the value does not change with
+        differentiation (the gradient costs the finer grid's ``value_and_grad`` plus
+        the value). ``"high"`` takes ``se_angular_for``'s count by itself when ``u`` and
+        the spectra are concrete at a peak ``S_x / S_n`` beyond ``CHECKED_SNR`` (a
+        gradient in the coefficients, the field or a lens's parameters, ``lens_merit``
+        included), unless ``se_angular`` or grid options are given. With ``u`` or the
+        spectra traced (differentiated, or arguments of your ``jit``) it cannot see the
+        ratio: each gradient then checks it at run time and warns beyond
+        ``CHECKED_SNR``, naming the count to give. Not with the default's tiers
+        (``ValueError``); concrete calls, which return values only, ignore it.
 
     Returns
     -------
@@ -1961,14 +1980,19 @@ def jmse(
         (aberrations, field, u, signal, noise),
         jmse_options(preset, quadrature=quadrature, nodes=nodes, se_nodes=se_nodes,
                      otf_method=otf_method, overlap_nodes=overlap_nodes,
-                     overlap_floor=overlap_floor, B=B, peaks=peaks, se_angular=se_angular))
+                     overlap_floor=overlap_floor, B=B, peaks=peaks, se_angular=se_angular,
+                     grad_se_angular=grad_se_angular))
+    # A preset's grids (the grid options, when given, are the user's own sizing).
+    preset_grid = all(v is None for v in (quadrature, nodes, se_nodes, otf_method,
+                                          overlap_nodes, overlap_floor))
     if is_concrete(inputs):
-        # A preset's grids on a design stronger than they were checked at: a warning (the
-        # grid options, when given, are the user's own sizing).
-        preset_grid = all(v is None for v in (quadrature, nodes, se_nodes, otf_method,
-                                              overlap_nodes, overlap_floor))
+        # On a design stronger than they were checked at: a warning.
         return _concrete_merit(static, inputs, warn=preset_grid)[0]
-    return _traced_entry(static, inputs)
+    gradient_static, watch = _gradient_static(static, (u, signal, noise), grad_se_angular,
+                                              auto=preset_grid and se_angular is None)
+    if gradient_static is None and not watch:
+        return _traced_entry(static, inputs)
+    return _refined_gradient_merit(static, gradient_static, watch, inputs)
 
 
 #: Backends on which ``vmap`` of ``jmse`` (and of its derivatives) runs the batch's designs
@@ -2020,13 +2044,103 @@ def _sequential_merit(static, inputs):
     return call(inputs)
 
 
+def _gradient_static(static, spectra, grad_se_angular, auto):
+    """``(gradient_static, watch)`` for ``jmse`` under tracing. ``gradient_static``: the
+    static of the program whose gradient ``jmse`` returns, when it is not ``static``'s own
+    (None otherwise), ``static`` with ``se_angular`` raised to ``grad_se_angular`` when that
+    is given, or, with ``auto`` (a preset's grids and no ``se_angular`` given), to
+    ``se_angular_for``'s count where ``static`` holds the peaks without the default's tiers
+    (``"high"``) and ``spectra``, the arguments ``(u, signal, noise)`` as given, are
+    concrete at a peak ``S_x / S_n`` beyond ``CHECKED_SNR`` (``"high"``'s own 960 angular
+    fine nodes hold its values to ``CHECKED_SNR_PEAKS`` but its gradients only to
+    ``CHECKED_SNR``: ``SE_ANGULAR_BY_SNR``). ``watch``: the same case with ``spectra``
+    traced, where the count cannot be chosen; a gradient then warns at run time beyond
+    ``CHECKED_SNR`` (``_warn_traced_gradient_snr``)."""
+    options, tiers = static.value[0], static.value[1]
+    if options["se_nodes"] is None or tiers is not None:
+        return None, False  # no fine polar grid, or the default's tiers (both refuse it)
+    own = max(options["se_nodes"][1], options["se_angular"] or 0)
+    count, watch = grad_se_angular, False
+    if count is None and auto and _snr_peaks(options["peaks"], tiers):
+        u, signal, noise = spectra
+        if is_concrete(spectra):
+            # Concrete even inside a caller's jit, where the call would be staged out.
+            with jax.ensure_compile_time_eval():
+                snr = float(_peak_snr(u, signal, noise))
+            count = _se_angular_for_snr(snr) if snr > CHECKED_SNR else None
+        else:
+            watch = True
+    if count is None or count <= own:
+        return None, watch
+    return _Static(({**options, "se_angular": count},) + tuple(static.value[1:])), False
+
+
+def _warn_traced_gradient_snr(own, snr):
+    """The run-time warning of a gradient of ``"high"`` (the peaks without the default's
+    tiers) whose ``u`` or spectra were traced (``_gradient_static``'s ``watch``), at the
+    peak ratios ``snr`` (one per design); ``own``: the grid's angular fine S_e nodes."""
+    snr = np.asarray(snr)
+    snr = snr[np.isfinite(snr)]  # out-of-range inputs give +inf values and zero gradients
+    if snr.size == 0 or snr.max() <= CHECKED_SNR:
+        return
+    count = _se_angular_for_snr(float(snr.max()))
+    warnings.warn(
+        f"jmse's gradient at a peak S_x / S_n of {snr.max():.2g}, beyond {CHECKED_SNR:.0e}, "
+        f"with {own} angular fine S_e nodes: with u or the spectra traced jmse cannot choose "
+        f"the count that holds it (SE_ANGULAR_BY_SNR: {count} here), and preset='high''s "
+        f"own {SE_ANGULAR_BY_SNR[0][1]} hold its gradient only to {CHECKED_SNR:.0e} (its "
+        f"values to {CHECKED_SNR_PEAKS:.0e}); pass grad_se_angular={count} "
+        f"(jmse_jax.se_angular_for(u, signal, noise)), or se_angular, to jmse",
+        UserWarning, stacklevel=2)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+def _refined_gradient_merit(static, gradient_static, watch, inputs):
+    """``_traced_entry(static, inputs)``, whose derivatives are those of
+    ``_traced_entry(gradient_static, inputs)`` (more angular fine S_e nodes,
+    ``_gradient_static``; ``static``'s own with None): the value does not change with
+    differentiation, and the gradient costs the finer program's ``value_and_grad`` plus
+    this value. ``watch``: every gradient checks the peak ``S_x / S_n`` and warns beyond
+    ``CHECKED_SNR`` (``_warn_traced_gradient_snr``; a host callback, about 0.1 ms). Derivative
+    rule and batching as ``_sequential_merit``'s: a reverse-mode gradient in the leaves
+    that carry a tangent, run design by design under ``vmap`` on
+    ``SEQUENTIAL_VMAP_BACKENDS``."""
+    merit = functools.partial(_traced_entry, static)
+    finer = functools.partial(_traced_merit, gradient_static or static)
+    sequential = jax.default_backend() in SEQUENTIAL_VMAP_BACKENDS
+
+    @jax.custom_jvp
+    def call(inputs):
+        return merit(inputs)
+
+    def call_jvp(primals, tangents):
+        (inputs,), (d_inputs,) = primals, tangents
+        wrt, live = _live_tangents(d_inputs)
+        value_and_grad = _value_and_grad(finer, wrt)
+        if sequential:
+            value_and_grad = one_at_a_time(value_and_grad)
+        value, gradient = value_and_grad(inputs)
+        if gradient_static is not None:
+            value = merit(inputs)
+        if watch:
+            own = static.value[0]["se_nodes"][1]
+            jax.debug.callback(functools.partial(_warn_traced_gradient_snr, own),
+                               _peak_snr(*inputs[2:]))
+        return value, _tangent(value, gradient, live)
+
+    call.defjvp(call_jvp, symbolic_zeros=True)
+    return call(inputs)
+
+
 def _prepare(arguments, options):
-    """``(static, inputs)`` of ``jmse`` for validated ``arguments`` and resolved options."""
+    """``(static, inputs)`` of ``jmse`` for validated ``arguments`` and resolved options
+    (``grad_se_angular`` is ``jmse``'s own business, not part of the static)."""
     _validate(*arguments)
     aberrations, field, u, signal, noise = arguments
     dtype = common_dtype(*arguments)
     inputs = (aberrations, jnp.asarray(field, dtype), jnp.asarray(u, dtype), signal, noise)
     options = dict(options)
+    options.pop("grad_se_angular", None)
     tiers = options.pop("tiers")
     radial = options.pop("radial") and _radial_applies(options, signal, noise)
     balanced = options.pop("balanced")  # None with a fixed grid (``jmse_options``)
@@ -2301,9 +2415,11 @@ def se_angular_for(u, signal, noise) -> int:
     """The ``se_angular`` (``jmse``'s option) that holds ``preset="high"``'s gradient off
     the axis at the peak ``S_x / S_n`` of these spectra over the band of ``u``
     (``SE_ANGULAR_BY_SNR``): 960, ``"high"``'s own, up to ``CHECKED_SNR``, more beyond.
-    ``optimise`` takes it by itself for ``"high"``; give it to ``jax.grad(jmse)`` calls of
-    your own at low noise, as ``jmse(..., preset="high", se_angular=se_angular_for(u,
-    signal, noise))``. Its values are held to ``CHECKED_SNR_PEAKS`` whatever the count."""
+    ``optimise`` takes it by itself for ``"high"``, and so do ``jmse``'s and ``lens_merit``'s
+    gradients where ``u`` and the spectra are concrete (``grad_se_angular``); give it to
+    gradients of your own whose ``u`` or spectra are traced, as ``jmse(...,
+    preset="high", grad_se_angular=se_angular_for(u, signal, noise))``. Its values are
+    held to ``CHECKED_SNR_PEAKS`` whatever the count."""
     check_range("u", u, 0.0, U_MAX, low_inclusive=False)
     if not isinstance(signal, AbstractSignal):
         raise TypeError(f"signal must be a jmse_jax signal model, got {type(signal)}")

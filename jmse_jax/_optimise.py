@@ -126,6 +126,10 @@ def lens_merit(
         ``u`` becomes ``u s`` and the spectra ``S(nu / s) / s²`` with
         ``s = lambda N / reference_scale``.
     jmse_options : dict, optional, keyword options of ``jmse`` (e.g. ``{"preset": "fast"}``)
+        With ``"high"`` at a concrete peak ``S_x / S_n`` beyond ``CHECKED_SNR`` and neither
+        ``se_angular``, ``grad_se_angular`` nor grid options given, the gradient takes
+        ``grad_se_angular=se_angular_for(u, signal, noise)`` (``jmse``'s note): inside,
+        ``u`` and the spectra are traced, so ``jmse`` cannot choose it there.
 
     Returns
     -------
@@ -144,6 +148,12 @@ def lens_merit(
             dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options)
         if is_concrete(lens):
             _check_lens_at(lens, wavelengths)
+        if merit == "jmse":
+            # "high"'s gradients at low noise (jmse's grad_se_angular); the value keeps
+            # the preset's grid. Inside _lens_merit_jit u and the spectra are traced (the
+            # band follows lambda N), so jmse cannot choose the count there itself.
+            jmse_options = _with_gradient_se_angular(jmse_options, u, signal, noise,
+                                                     key="grad_se_angular")
     if reference_scale is not None:
         check_range("reference_scale", reference_scale, 0.0, None, low_inclusive=False)
         reference_scale = jnp.asarray(reference_scale, dtype)
@@ -153,14 +163,16 @@ def lens_merit(
     )
 
 
-def _with_gradient_se_angular(jmse_options, u, signal, noise):
-    """``jmse_options`` with ``se_angular`` from ``se_angular_for`` where ``optimise``'s
-    gradient needs more angular fine S_e nodes than the preset's: ``"high"`` (the peaks
-    without the default's tiers) at a concrete peak ``S_x / S_n`` beyond ``CHECKED_SNR``,
-    with neither ``se_angular`` nor grid options given. Anything else (bad arguments
-    included, which the checks then refuse) is returned as it is."""
+def _with_gradient_se_angular(jmse_options, u, signal, noise, key="se_angular"):
+    """``jmse_options`` with ``key`` (``"se_angular"`` for ``optimise``, whose every value
+    comes with a gradient; ``"grad_se_angular"`` for ``lens_merit``, whose value keeps the
+    preset's grid) from ``se_angular_for`` where the gradient needs more angular fine S_e
+    nodes than the preset's: ``"high"`` (the peaks without the default's tiers) at a
+    concrete peak ``S_x / S_n`` beyond ``CHECKED_SNR``, with neither ``se_angular``,
+    ``grad_se_angular`` nor grid options given. Anything else (bad arguments included,
+    which the checks then refuse) is returned as it is."""
     if (jmse_options is None or not isinstance(jmse_options, dict)
-            or "se_angular" in jmse_options
+            or "se_angular" in jmse_options or "grad_se_angular" in jmse_options
             or any(key in jmse_options for key in _GRID_OPTIONS)
             or not isinstance(signal, AbstractSignal) or not isinstance(noise, AbstractNoise)
             or not is_concrete((u, signal, noise))):
@@ -173,7 +185,7 @@ def _with_gradient_se_angular(jmse_options, u, signal, noise):
     if (not _snr_peaks(options["peaks"], options["tiers"]) or options["se_nodes"] is None
             or count <= options["se_nodes"][1]):
         return jmse_options
-    return {**jmse_options, "se_angular": count}
+    return {**jmse_options, key: count}
 
 
 def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavelengths,
@@ -197,7 +209,9 @@ def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavel
         options = _full_jmse_options(**(jmse_options or {}))
         _warn_beyond_checked_snr(u, signal, noise, stacklevel=4,
                                  peaks=_snr_peaks(options["peaks"], options["tiers"]),
-                                 gradient=gradient, se_angular=options["se_angular"])
+                                 gradient=gradient, se_angular=max(
+                                     options["se_angular"] or 0,
+                                     options["grad_se_angular"] or 0) or None)
     check_range("fields", fields, 0.0, 1.0)
     fields = jnp.asarray(fields, dtype)
     if fields.ndim != 1 or fields.shape[0] == 0:

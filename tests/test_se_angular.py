@@ -25,9 +25,11 @@ from jmse_jax._merit import (  # noqa: E402
     HIGH_RAY_GRID,
     PRESETS,
     _base_plans,
+    _gradient_static,
     _prepare,
     _radial_plans,
     _tier_plans_of,
+    jmse_options,
 )
 from jmse_jax._optimise import _with_gradient_se_angular  # noqa: E402
 
@@ -209,3 +211,121 @@ def test_gradient_in_u_does_not_store_the_fine_grid():
     assert float(value) == pytest.approx(float(value_p), rel=1e-14)
     np.testing.assert_allclose(np.asarray(g_c), np.asarray(g_c_p), rtol=1e-13, atol=0)
     assert float(g_u) == pytest.approx(float(g_u_p), rel=1e-13)
+
+
+# --- grad_se_angular: the gradient's own count (session 87) ---------------------------------
+#: Session 85's steep design (``benchmarks/se_angular.py``), under its power-law spectrum at
+#: a peak S_x / S_n of 1.5e7 (``se_angular_for``: 1920). ``fast`` with ``peaks=True`` has the
+#: peaks without the default's tiers, as ``"high"`` does, so it takes the count by itself as
+#: ``"high"`` would, on a grid that compiles in seconds; its own 48 angular fine nodes leave
+#: this design's gradient 9.7e-2 off the 1920's.
+STEEP = dict(w020=6.644932297844935, w040=2.724906347815633, w131=3.085795717363572,
+             w222=-5.3801335287493135, w220=-7.617778976339013)
+STEEP_FIELD, STEEP_U = 0.9469066664934074, 0.85
+STEEP_SIGNAL = jj.PowerLawSignal(1.8291638495696567e-4, 2.946692010240536,
+                                 0.06186467434113549)
+STEEP_PEAK = float(STEEP_SIGNAL(jnp.zeros(()), jnp.zeros(())))  # per unit white noise
+PEAKED_FAST = dict(preset="fast", peaks=True)
+
+
+def _steep(c, noise, **options):
+    return jj.jmse(jj.Seidel(*c), STEEP_FIELD, STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(noise),
+                   **PEAKED_FAST, **options)
+
+
+def _relative(a, b):
+    return float(jnp.max(jnp.abs(a - b)) / jnp.max(jnp.abs(b)))
+
+
+def test_gradient_takes_the_count_by_itself_with_concrete_spectra():
+    """Differentiated with ``u`` and the spectra concrete, the peaks without the tiers take
+    ``se_angular_for``'s count for the gradient alone: the gradient is the 1920 grid's, the
+    value the call's own (eager). With ``se_angular`` given, nothing is added; below
+    ``CHECKED_SNR`` neither; ``grad_se_angular`` given takes that count even with traced
+    spectra, without a warning."""
+    c0 = jnp.array([STEEP[k] for k in ("w020", "w040", "w131", "w222", "w220")])
+    noise = STEEP_PEAK / 1.5e7
+    assert jj.se_angular_for(STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(noise)) == 1920
+    own = jax.grad(lambda c: _steep(c, noise, se_angular=48))(c0)
+    fine = jax.grad(lambda c: _steep(c, noise, se_angular=1920))(c0)
+    assert _relative(own, fine) > 1e-2  # the preset's own count does not hold it
+    value, grad = jax.jit(jax.value_and_grad(lambda c: _steep(c, noise)))(c0)
+    assert _relative(grad, fine) < 1e-12
+    assert float(value) == pytest.approx(float(_steep(c0, noise)), rel=1e-13)
+    # The caller's count is the caller's: no count of jmse's own on top.
+    assert _relative(jax.grad(lambda c: _steep(c, noise, se_angular=48))(c0), own) < 1e-13
+    # Traced noise with the count given: that count, and no warning.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        given = jax.grad(lambda c, n: _steep(c, n, grad_se_angular=1920), argnums=(0, 1))(
+            c0, noise)
+        assert _relative(given[0], fine) < 1e-12
+    # Below CHECKED_SNR no count is added (the preset's own holds the gradient there).
+    static, _ = _prepare(_design(), jmse_options(**PEAKED_FAST))
+    spectra = (STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(100 * noise))  # 1.5e5
+    assert _gradient_static(static, spectra, None, True) == (None, False)
+    spectra = (STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(noise))
+    assert _gradient_static(static, spectra, None, True)[0].value[0]["se_angular"] == 1920
+
+
+def test_traced_spectra_warn_at_run_time():
+    """With the noise traced (an argument of the caller's ``jit`` and differentiated) the
+    count cannot be chosen: each gradient checks the peak ratio when it runs and warns
+    beyond ``CHECKED_SNR``, naming the count; at a ratio inside it, silence. Under ``vmap``
+    one design beyond is enough."""
+    c0 = jnp.array([STEEP[k] for k in ("w020", "w040", "w131", "w222", "w220")])
+    noise = STEEP_PEAK / 1.5e7
+    program = jax.jit(jax.value_and_grad(_steep, argnums=(0, 1)))
+    with pytest.warns(UserWarning, match=r"peak S_x / S_n of 1\.5e\+07.*with 48 angular fine "
+                                         r"S_e nodes.*pass grad_se_angular=1920"):
+        value, (grad, _) = program(c0, noise)
+        jax.block_until_ready(grad)
+    own = jax.grad(lambda c: _steep(c, noise, se_angular=48))(c0)
+    assert _relative(grad, own) < 1e-12  # the warned gradient is the call's own grid's
+    assert float(value) == pytest.approx(float(_steep(c0, noise)), rel=1e-13)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jax.block_until_ready(program(c0, 100 * noise))
+    with pytest.warns(UserWarning, match="pass grad_se_angular=1920"):
+        jax.block_until_ready(jax.vmap(program, in_axes=(None, 0))(
+            c0, jnp.array([100 * noise, noise])))
+
+
+def test_lens_merit_gradient_takes_the_count():
+    """``lens_merit`` (whose ``u`` and spectra are traced inside, the band following
+    ``lambda N``) chooses the count from its concrete arguments and passes it on as
+    ``grad_se_angular``: the gradient in the focus is the 1920 grid's (4e-4 from the own
+    grid's here), the value the call's own."""
+    from jmse_jax.lens import paper_singlet
+
+    noise = jj.WhiteNoise(STEEP_PEAK / 1.5e7)
+
+    def merit(shift, **options):
+        return jj.lens_merit(paper_singlet(1.0, 0.05, image_shift=shift), u=STEEP_U,
+                             signal=STEEP_SIGNAL, noise=noise, fields=(1.0,),
+                             jmse_options=dict(PEAKED_FAST, **options))
+
+    value, grad = jax.value_and_grad(merit)(0.0)
+    own = jax.grad(lambda s: merit(s, se_angular=48))(0.0)
+    fine = jax.grad(lambda s: merit(s, se_angular=1920))(0.0)
+    assert abs(own / fine - 1) > 1e-4
+    assert float(grad) == pytest.approx(float(fine), rel=1e-12)
+    assert float(value) == pytest.approx(float(merit(0.0)), rel=1e-13)
+    assert _with_gradient_se_angular(PEAKED_FAST, STEEP_U, STEEP_SIGNAL, noise,
+                                     key="grad_se_angular") == dict(PEAKED_FAST,
+                                                                    grad_se_angular=1920)
+    given = dict(PEAKED_FAST, grad_se_angular=960)  # the caller's: kept, also by optimise
+    assert _with_gradient_se_angular(given, STEEP_U, STEEP_SIGNAL, noise) == given
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(preset="default", grad_se_angular=1920),
+     r"grad_se_angular applies to fixed grids.*grad_se_angular=1920 with preset='default'"),
+    (dict(preset="high", grad_se_angular=0), r"grad_se_angular must be"),
+    (dict(preset="fast", grad_se_angular=2.5), r"grad_se_angular must be"),
+    (dict(preset="high", quadrature="gauss", nodes=16, grad_se_angular=96),
+     r"grad_se_angular needs the polar rule.*quadrature='gauss'"),
+])
+def test_bad_grad_se_angular_is_refused(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        jj.jmse(*_design(), **kwargs)
