@@ -24,6 +24,8 @@ import optimistix as optx
 
 from ._merit import (
     _GRID_OPTIONS,
+    CHECKED_SNR,
+    _peak_snr,
     _snr_peaks,
     _warn_beyond_checked_snr,
     jmse,
@@ -145,7 +147,8 @@ def lens_merit(
     # array operations would otherwise be staged out and give tracers.
     with jax.ensure_compile_time_eval():
         fields, weights, wavelengths = _check_merit_arguments(
-            dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options)
+            dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options,
+            warn=merit == "jmse")
         if is_concrete(lens):
             _check_lens_at(lens, wavelengths)
         if merit == "jmse":
@@ -173,7 +176,7 @@ def _with_gradient_se_angular(jmse_options, u, signal, noise, key="se_angular"):
     which the checks then refuse) is returned as it is."""
     if (jmse_options is None or not isinstance(jmse_options, dict)
             or "se_angular" in jmse_options or "grad_se_angular" in jmse_options
-            or any(key in jmse_options for key in _GRID_OPTIONS)
+            or any(name in jmse_options for name in _GRID_OPTIONS)
             or not isinstance(signal, AbstractSignal) or not isinstance(noise, AbstractNoise)
             or not is_concrete((u, signal, noise))):
         return jmse_options
@@ -182,17 +185,22 @@ def _with_gradient_se_angular(jmse_options, u, signal, noise, key="se_angular"):
         count = se_angular_for(u, signal, noise)
     except (TypeError, ValueError):
         return jmse_options  # refused with its own message by the checks that follow
+    # Within CHECKED_SNR the grid's own count stands (se_angular_for gives "high"'s 960
+    # there, more than the 48 of "fast" with peaks=True, which holds it as it is).
     if (not _snr_peaks(options["peaks"], options["tiers"]) or options["se_nodes"] is None
-            or count <= options["se_nodes"][1]):
+            or count <= options["se_nodes"][1]
+            or not float(_peak_snr(u, signal, noise)) > CHECKED_SNR):
         return jmse_options
     return {**jmse_options, key: count}
 
 
 def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavelengths,
-                           jmse_options, gradient=False):
+                           jmse_options, gradient=False, warn=True):
     """Checks of the arguments ``lens_merit`` and ``optimise`` share; returns ``fields``,
     the field weights and ``wavelengths`` (None or a 1-D array) as arrays of ``dtype``.
-    ``gradient`` (``optimise``): the noise check holds the gradient to ``CHECKED_SNR``."""
+    ``gradient`` (``optimise`` of the JMSE): the noise check holds the gradient to
+    ``CHECKED_SNR``. ``warn``: the noise check runs (not for ``lens_merit``'s ``"rms"``,
+    which computes no JMSE; ``optimise``'s reports the JMSE, so it checks the value)."""
     check_range("u", u, 0.0, 1.5, low_inclusive=False)
     if np.ndim(u) != 0:
         raise ValueError(f"u must be a scalar, got shape {np.shape(u)}")
@@ -203,7 +211,7 @@ def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavel
     if jmse_options is not None and not isinstance(jmse_options, dict):
         raise TypeError(f"jmse_options must be a dict of jmse keyword options, "
                         f"got {jmse_options!r}")
-    if (signal is not None and noise is not None and is_concrete((u, signal, noise))
+    if (warn and signal is not None and noise is not None and is_concrete((u, signal, noise))
             and not any(key in (jmse_options or {}) for key in _GRID_OPTIONS)):
         # lens_merit -> _check_merit_arguments -> here -> warn: the user's call is 4 up.
         options = _full_jmse_options(**(jmse_options or {}))
@@ -710,7 +718,7 @@ def optimise(
         jmse_options = _with_gradient_se_angular(jmse_options, u, signal, noise)
     fields, field_weights, wavelengths = _check_merit_arguments(
         dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options,
-        gradient=True)
+        gradient=merit == "jmse")
     if bounds is not None and not isinstance(bounds, dict):
         raise TypeError(f"bounds must be a dict name -> (low, high), got {bounds!r}")
     for name, pair in (bounds or {}).items():

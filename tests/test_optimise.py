@@ -379,3 +379,15 @@ def test_noise_beyond_the_checked_snr_warns_in_lens_merit_and_optimise():
         with pytest.raises(ValueError, match="fields must be in"):
             optimise(lens, ("image_shift",),
                      **dict(high, jmse_options={"preset": "high", "se_angular": 960}))
+    # merit="rms": lens_merit computes no JMSE, so no check; optimise follows the wavefront's
+    # gradient and reports the JMSE, so it checks the value only (session 87).
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="fields must be in"):
+            lens_merit(lens, merit="rms", **noisy)
+        with pytest.raises(ValueError, match="fields must be in"):
+            optimise(lens, ("image_shift",), merit="rms",
+                     **dict(high, jmse_options={"preset": "high", "se_angular": 960}))
+    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond"):
+        with pytest.raises(ValueError, match="fields must be in"):
+            optimise(lens, ("image_shift",), merit="rms", **noisy)

@@ -8,6 +8,7 @@ same grid given explicitly: ``preset="fast", se_angular=n`` must be ``fast``'s g
 --preset high --gradient --noise``.
 """
 
+import functools
 import warnings
 
 import jax
@@ -237,84 +238,90 @@ def _relative(a, b):
     return float(jnp.max(jnp.abs(a - b)) / jnp.max(jnp.abs(b)))
 
 
+STEEP_C = jnp.array([STEEP[k] for k in ("w020", "w040", "w131", "w222", "w220")])
+STEEP_NOISE = STEEP_PEAK / 1.5e7  # se_angular_for: 1920
+
+
+@functools.cache
+def _steep_gradient(se_angular):
+    """The gradient in the coefficients of the steep design with ``se_angular`` given (no
+    count of ``jmse``'s own on top): the oracles."""
+    return jax.grad(lambda c: _steep(c, STEEP_NOISE, se_angular=se_angular))(STEEP_C)
+
+
 def test_gradient_takes_the_count_by_itself_with_concrete_spectra():
     """Differentiated with ``u`` and the spectra concrete, the peaks without the tiers take
     ``se_angular_for``'s count for the gradient alone: the gradient is the 1920 grid's, the
-    value the call's own (eager). With ``se_angular`` given, nothing is added; below
-    ``CHECKED_SNR`` neither; ``grad_se_angular`` given takes that count even with traced
-    spectra, without a warning."""
-    c0 = jnp.array([STEEP[k] for k in ("w020", "w040", "w131", "w222", "w220")])
-    noise = STEEP_PEAK / 1.5e7
-    assert jj.se_angular_for(STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(noise)) == 1920
-    own = jax.grad(lambda c: _steep(c, noise, se_angular=48))(c0)
-    fine = jax.grad(lambda c: _steep(c, noise, se_angular=1920))(c0)
+    value the call's own (eager). With ``se_angular`` given nothing is added, below
+    ``CHECKED_SNR`` neither, and ``grad_se_angular`` given is taken with traced spectra too
+    (``_gradient_static``; the program is the same)."""
+    assert jj.se_angular_for(STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(STEEP_NOISE)) == 1920
+    own, fine = _steep_gradient(48), _steep_gradient(1920)
     assert _relative(own, fine) > 1e-2  # the preset's own count does not hold it
-    value, grad = jax.jit(jax.value_and_grad(lambda c: _steep(c, noise)))(c0)
+    value, grad = jax.jit(jax.value_and_grad(lambda c: _steep(c, STEEP_NOISE)))(STEEP_C)
     assert _relative(grad, fine) < 1e-12
-    assert float(value) == pytest.approx(float(_steep(c0, noise)), rel=1e-13)
-    # The caller's count is the caller's: no count of jmse's own on top.
-    assert _relative(jax.grad(lambda c: _steep(c, noise, se_angular=48))(c0), own) < 1e-13
-    # Traced noise with the count given: that count, and no warning.
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        given = jax.grad(lambda c, n: _steep(c, n, grad_se_angular=1920), argnums=(0, 1))(
-            c0, noise)
-        assert _relative(given[0], fine) < 1e-12
-    # Below CHECKED_SNR no count is added (the preset's own holds the gradient there).
+    assert float(value) == pytest.approx(float(_steep(STEEP_C, STEEP_NOISE)), rel=1e-13)
     static, _ = _prepare(_design(), jmse_options(**PEAKED_FAST))
-    spectra = (STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(100 * noise))  # 1.5e5
-    assert _gradient_static(static, spectra, None, True) == (None, False)
-    spectra = (STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(noise))
-    assert _gradient_static(static, spectra, None, True)[0].value[0]["se_angular"] == 1920
+
+    def choice(noise, given=None, auto=True):
+        chosen, watch = _gradient_static(static, (STEEP_U, STEEP_SIGNAL, noise), given, auto)
+        return None if chosen is None else chosen.value[0]["se_angular"], watch
+
+    assert choice(jj.WhiteNoise(STEEP_NOISE)) == (1920, False)
+    assert choice(jj.WhiteNoise(100 * STEEP_NOISE)) == (None, False)  # 1.5e5
+    assert choice(jj.WhiteNoise(STEEP_NOISE), auto=False) == (None, False)  # se_angular given
+
+    def traced(given=None):  # the choice with the noise level a tracer
+        out = []
+        jax.make_jaxpr(lambda n: out.append(choice(jj.WhiteNoise(n), given)) or n)(
+            STEEP_NOISE)
+        return out[0]
+
+    assert traced() == (None, True)
+    assert traced(given=1920) == (1920, False)
+    assert traced(given=32) == (None, False)  # below the grid's own 48
 
 
 def test_traced_spectra_warn_at_run_time():
-    """With the noise traced (an argument of the caller's ``jit`` and differentiated) the
-    count cannot be chosen: each gradient checks the peak ratio when it runs and warns
-    beyond ``CHECKED_SNR``, naming the count; at a ratio inside it, silence. Under ``vmap``
-    one design beyond is enough."""
-    c0 = jnp.array([STEEP[k] for k in ("w020", "w040", "w131", "w222", "w220")])
-    noise = STEEP_PEAK / 1.5e7
-    program = jax.jit(jax.value_and_grad(_steep, argnums=(0, 1)))
-    with pytest.warns(UserWarning, match=r"peak S_x / S_n of 1\.5e\+07.*with 48 angular fine "
-                                         r"S_e nodes.*pass grad_se_angular=1920"):
-        value, (grad, _) = program(c0, noise)
-        jax.block_until_ready(grad)
-    own = jax.grad(lambda c: _steep(c, noise, se_angular=48))(c0)
-    assert _relative(grad, own) < 1e-12  # the warned gradient is the call's own grid's
-    assert float(value) == pytest.approx(float(_steep(c0, noise)), rel=1e-13)
+    """With the noise traced (an argument of the caller's ``jit``, differentiated, here
+    under ``vmap``) the count cannot be chosen: each gradient checks the peak ratio when it
+    runs and warns beyond ``CHECKED_SNR``, naming the count; inside it, silence. The
+    gradient is the call's own grid's."""
+    program = jax.jit(jax.vmap(jax.value_and_grad(_steep, argnums=(0, 1)), in_axes=(None, 0)))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        jax.block_until_ready(program(c0, 100 * noise))
-    with pytest.warns(UserWarning, match="pass grad_se_angular=1920"):
-        jax.block_until_ready(jax.vmap(program, in_axes=(None, 0))(
-            c0, jnp.array([100 * noise, noise])))
+        jax.block_until_ready(program(STEEP_C, jnp.full(2, 100 * STEEP_NOISE)))
+    with pytest.warns(UserWarning, match=r"peak S_x / S_n of 1\.5e\+07.*with 48 angular fine "
+                                         r"S_e nodes.*pass grad_se_angular=1920"):
+        value, (grad, _) = program(STEEP_C, jnp.array([100 * STEEP_NOISE, STEEP_NOISE]))
+        jax.block_until_ready(grad)
+    assert _relative(grad[1], _steep_gradient(48)) < 1e-12
+    assert float(value[1]) == pytest.approx(float(_steep(STEEP_C, STEEP_NOISE)), rel=1e-13)
 
 
-def test_lens_merit_gradient_takes_the_count():
-    """``lens_merit`` (whose ``u`` and spectra are traced inside, the band following
-    ``lambda N``) chooses the count from its concrete arguments and passes it on as
-    ``grad_se_angular``: the gradient in the focus is the 1920 grid's (4e-4 from the own
-    grid's here), the value the call's own."""
+def test_lens_merit_passes_the_count_on(monkeypatch):
+    """``lens_merit`` traces ``u`` and the spectra inside (the band follows ``lambda N``),
+    so it chooses the count from its concrete arguments and gives it to ``jmse`` as
+    ``grad_se_angular`` (what ``jmse`` does with it is the tests' above); ``optimise``
+    keeps a count the caller gave."""
+    import jmse_jax._optimise as optimise_module
     from jmse_jax.lens import paper_singlet
 
-    noise = jj.WhiteNoise(STEEP_PEAK / 1.5e7)
+    seen = []
 
-    def merit(shift, **options):
-        return jj.lens_merit(paper_singlet(1.0, 0.05, image_shift=shift), u=STEEP_U,
-                             signal=STEEP_SIGNAL, noise=noise, fields=(1.0,),
-                             jmse_options=dict(PEAKED_FAST, **options))
+    def spy(aberrations, field, u, signal, noise, **options):
+        seen.append(options)
+        return u * jnp.sum(aberrations.w020)  # the plumbing only: no grid compiled
 
-    value, grad = jax.value_and_grad(merit)(0.0)
-    own = jax.grad(lambda s: merit(s, se_angular=48))(0.0)
-    fine = jax.grad(lambda s: merit(s, se_angular=1920))(0.0)
-    assert abs(own / fine - 1) > 1e-4
-    assert float(grad) == pytest.approx(float(fine), rel=1e-12)
-    assert float(value) == pytest.approx(float(merit(0.0)), rel=1e-13)
-    assert _with_gradient_se_angular(PEAKED_FAST, STEEP_U, STEEP_SIGNAL, noise,
-                                     key="grad_se_angular") == dict(PEAKED_FAST,
-                                                                    grad_se_angular=1920)
-    given = dict(PEAKED_FAST, grad_se_angular=960)  # the caller's: kept, also by optimise
+    monkeypatch.setattr(optimise_module, "jmse", spy)
+    noise = jj.WhiteNoise(STEEP_NOISE)
+    for level, count in ((noise, 1920), (jj.WhiteNoise(100 * STEEP_NOISE), None)):
+        seen.clear()
+        jax.grad(lambda s, level=level: jj.lens_merit(
+            paper_singlet(1.0, 0.05, image_shift=s), u=STEEP_U, signal=STEEP_SIGNAL,
+            noise=level, fields=(1.0,), jmse_options=PEAKED_FAST))(0.0)
+        assert seen and all(o.get("grad_se_angular") == count for o in seen), seen
+    given = dict(PEAKED_FAST, grad_se_angular=960)  # the caller's: kept, by optimise too
     assert _with_gradient_se_angular(given, STEEP_U, STEEP_SIGNAL, noise) == given
 
 
