@@ -172,8 +172,9 @@ def _with_gradient_se_angular(jmse_options, u, signal, noise, key="se_angular"):
     preset's grid) from ``se_angular_for`` where the gradient needs more angular fine S_e
     nodes than the preset's: ``"high"`` (the peaks without the default's tiers) at a
     concrete peak ``S_x / S_n`` beyond ``CHECKED_SNR``, with neither ``se_angular``,
-    ``grad_se_angular`` nor grid options given. Anything else (bad arguments included,
-    which the checks then refuse) is returned as it is."""
+    ``grad_se_angular`` nor grid options given; within it, ``grad_se_angular`` at the
+    grid's own count (checked: no run-time check then). Anything else (bad arguments
+    included, which the checks then refuse) is returned as it is."""
     if (jmse_options is None or not isinstance(jmse_options, dict)
             or "se_angular" in jmse_options or "grad_se_angular" in jmse_options
             or any(name in jmse_options for name in _GRID_OPTIONS)
@@ -185,13 +186,16 @@ def _with_gradient_se_angular(jmse_options, u, signal, noise, key="se_angular"):
         count = se_angular_for(u, signal, noise)
     except (TypeError, ValueError):
         return jmse_options  # refused with its own message by the checks that follow
-    # Within CHECKED_SNR the grid's own count stands (se_angular_for gives "high"'s 960
-    # there, more than the 48 of "fast" with peaks=True, which holds it as it is).
-    if (not _snr_peaks(options["peaks"], options["tiers"]) or options["se_nodes"] is None
-            or count <= options["se_nodes"][1]
-            or not float(_peak_snr(u, signal, noise)) > CHECKED_SNR):
+    if not _snr_peaks(options["peaks"], options["tiers"]) or options["se_nodes"] is None:
         return jmse_options
-    return {**jmse_options, key: count}
+    own = options["se_nodes"][1]
+    if float(_peak_snr(u, signal, noise)) > CHECKED_SNR and count > own:
+        return {**jmse_options, key: count}
+    # Within CHECKED_SNR the grid's own count holds the gradient (se_angular_for gives
+    # "high"'s 960 there, more than the 48 of "fast" with peaks=True, which holds it as it
+    # is). Saying so spares the gradients a run-time check of the ratio: inside
+    # _lens_merit_jit jmse sees u and the spectra traced (_merit._gradient_static's watch).
+    return {**jmse_options, "grad_se_angular": own}
 
 
 def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavelengths,

@@ -154,7 +154,9 @@ def test_optimise_takes_se_angular_for_high_beyond_the_checked_snr():
     for options in ({"preset": "fast"}, {}, None, {"preset": "high", "se_angular": 1920},
                     {"preset": "high", "se_nodes": (2800, 960)}):
         assert _with_gradient_se_angular(options, 0.2, signal, high_snr) == options
-    assert _with_gradient_se_angular({"preset": "high"}, 0.2, signal, low) == {"preset": "high"}
+    # Within it the own count, as checked (no run-time check of the ratio in the gradient).
+    assert _with_gradient_se_angular({"preset": "high"}, 0.2, signal, low) == {
+        "preset": "high", "grad_se_angular": 960}
 
 
 def test_optimise_warns_for_high_only_with_too_few_angular_nodes():
@@ -302,8 +304,9 @@ def test_traced_spectra_warn_at_run_time():
 def test_lens_merit_passes_the_count_on(monkeypatch):
     """``lens_merit`` traces ``u`` and the spectra inside (the band follows ``lambda N``),
     so it chooses the count from its concrete arguments and gives it to ``jmse`` as
-    ``grad_se_angular`` (what ``jmse`` does with it is the tests' above); ``optimise``
-    keeps a count the caller gave."""
+    ``grad_se_angular`` (what ``jmse`` does with it is the tests' above); within
+    ``CHECKED_SNR`` the grid's own 48, which spares the gradient its run-time check.
+    ``optimise`` keeps a count the caller gave."""
     import jmse_jax._optimise as optimise_module
     from jmse_jax.lens import paper_singlet
 
@@ -315,7 +318,7 @@ def test_lens_merit_passes_the_count_on(monkeypatch):
 
     monkeypatch.setattr(optimise_module, "jmse", spy)
     noise = jj.WhiteNoise(STEEP_NOISE)
-    for level, count in ((noise, 1920), (jj.WhiteNoise(100 * STEEP_NOISE), None)):
+    for level, count in ((noise, 1920), (jj.WhiteNoise(100 * STEEP_NOISE), 48)):
         seen.clear()
         jax.grad(lambda s, level=level: jj.lens_merit(
             paper_singlet(1.0, 0.05, image_shift=s), u=STEEP_U, signal=STEEP_SIGNAL,
