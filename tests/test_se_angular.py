@@ -107,17 +107,20 @@ def test_se_angular_reaches_every_branch_of_high():
         assert ray["se_nodes"] == HIGH_RAY_GRID["se_nodes"]
 
 
+@pytest.mark.parametrize("name", ["se_angular", "grad_se_angular"])
 @pytest.mark.parametrize("kwargs, match", [
-    (dict(preset="default", se_angular=1920), r"se_angular applies to fixed grids.*"
-                                              r"se_angular=1920 with preset='default'"),
-    (dict(preset="high", se_angular=0), r"se_angular must be"),
-    (dict(preset="high", se_angular=-5), r"se_angular must be"),
-    (dict(preset="fast", se_angular=2.5), r"se_angular must be"),
-    (dict(preset="high", quadrature="gauss", nodes=16, se_angular=96),
-     r"se_angular needs the polar rule.*quadrature='gauss'"),
+    (dict(preset="default", count=1920), r"{name} applies to fixed grids.*"
+                                         r"{name}=1920 with preset='default'"),
+    (dict(preset="high", count=0), r"{name} must be"),
+    (dict(preset="high", count=-5), r"{name} must be"),
+    (dict(preset="fast", count=2.5), r"{name} must be"),
+    (dict(preset="high", quadrature="gauss", nodes=16, count=96),
+     r"{name} needs the polar rule.*quadrature='gauss'"),
 ])
-def test_bad_se_angular_is_refused(kwargs, match):
-    with pytest.raises(ValueError, match=match):
+def test_bad_angular_counts_are_refused(name, kwargs, match):
+    """``se_angular`` and ``grad_se_angular`` (session 87) are refused alike."""
+    kwargs = {(name if key == "count" else key): value for key, value in kwargs.items()}
+    with pytest.raises(ValueError, match="(^|[^_])" + match.format(name=name)):
         jj.jmse(*_design(), **kwargs)
 
 
@@ -326,16 +329,3 @@ def test_lens_merit_passes_the_count_on(monkeypatch):
         assert seen and all(o.get("grad_se_angular") == count for o in seen), seen
     given = dict(PEAKED_FAST, grad_se_angular=960)  # the caller's: kept, by optimise too
     assert _with_gradient_se_angular(given, STEEP_U, STEEP_SIGNAL, noise) == given
-
-
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(preset="default", grad_se_angular=1920),
-     r"grad_se_angular applies to fixed grids.*grad_se_angular=1920 with preset='default'"),
-    (dict(preset="high", grad_se_angular=0), r"grad_se_angular must be"),
-    (dict(preset="fast", grad_se_angular=2.5), r"grad_se_angular must be"),
-    (dict(preset="high", quadrature="gauss", nodes=16, grad_se_angular=96),
-     r"grad_se_angular needs the polar rule.*quadrature='gauss'"),
-])
-def test_bad_grad_se_angular_is_refused(kwargs, match):
-    with pytest.raises(ValueError, match=match):
-        jj.jmse(*_design(), **kwargs)
