@@ -155,7 +155,9 @@ CHECKED_SNR = 2e6
 #: found 2.6e-5, gradient 1.4e-4, on a design of strength 24.2 at u 0.84 and 6.2e7 on
 #: ``HIGH_STEEP_GRID``, whose 128 radial OTF nodes bind there: 256 hold 2e-8, and at 2e6
 #: the 128 hold 1.4e-7; its seed 4 a gradient 3.0e-4 off, value 4.3e-7, at 1.2e7 on the
-#: own grid, whose 80 radial OTF nodes bind: 160 hold 5.2e-6). Its gradients there
+#: own grid, whose 80 radial OTF nodes bind: 160 hold 5.2e-6; on that design at 2e8 the
+#: own grid's value is 3.2e-5 off, its gradient 6.9e-4, and 120 hold 8.4e-7 and 1.6e-5:
+#: benchmarks/README.md). Its gradients there
 #: were not held: up to 9.7e-2 off (value 9e-7) on a strong design near the cutoff (its
 #: balanced grid), where ``S_e`` turns from ``S_n / |H|^2`` to ``S_x`` along curves
 #: narrower than its 960 angular fine nodes (``HIGH_STEEP_GRID``'s counts there: 2.0e-2;
