@@ -1996,9 +1996,7 @@ def jmse(
         return _concrete_merit(static, inputs, warn=preset_grid)[0]
     gradient_static, watch = _gradient_static(static, (u, signal, noise), grad_se_angular,
                                               auto=preset_grid and se_angular is None)
-    if gradient_static is None and not watch:
-        return _traced_entry(static, inputs)
-    return _refined_gradient_merit(static, gradient_static, watch, inputs)
+    return _traced_entry(static, inputs, gradient_static, watch)
 
 
 #: Backends on which ``vmap`` of ``jmse`` (and of its derivatives) runs the batch's designs
@@ -2010,18 +2008,27 @@ def jmse(
 SEQUENTIAL_VMAP_BACKENDS = ("cpu",)
 
 
-def _traced_entry(static, inputs):
+def _traced_entry(static, inputs, gradient_static=None, watch=False):
     """``_traced_merit``, run design by design under ``vmap`` on the backends of
-    ``SEQUENTIAL_VMAP_BACKENDS`` (the default backend's, at trace time)."""
-    if jax.default_backend() not in SEQUENTIAL_VMAP_BACKENDS:
+    ``SEQUENTIAL_VMAP_BACKENDS`` (the default backend's, at trace time), with the gradient
+    of ``gradient_static`` and the run-time check ``watch`` when ``_gradient_static`` asks
+    for them (``_merit_with_rule``)."""
+    sequential = jax.default_backend() in SEQUENTIAL_VMAP_BACKENDS
+    if not sequential and gradient_static is None and not watch:
         return _traced_merit(static, inputs)
-    return _sequential_merit(static, inputs)
+    return _merit_with_rule(static, gradient_static, watch, sequential, inputs)
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def _sequential_merit(static, inputs):
-    """``_traced_merit(static, inputs)`` whose ``vmap`` runs design by design, for the value
-    and for first derivatives alike.
+@functools.partial(jax.jit, static_argnums=(0, 1, 2, 3))
+def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
+    """``_traced_merit(static, inputs)`` under a derivative rule of its own: with
+    ``sequential`` its ``vmap`` runs design by design, for the value and for first
+    derivatives alike; with ``gradient_static`` (``_gradient_static``: more angular fine S_e
+    nodes) its derivatives are that program's while the value stays ``static``'s, so it
+    does not change with differentiation (the gradient costs the finer program's
+    ``value_and_grad`` plus this value); with ``watch`` every gradient checks the peak
+    ``S_x / S_n`` and warns beyond ``CHECKED_SNR`` (``_warn_traced_gradient_snr``; a host
+    callback, about 0.1 ms).
 
     Jitted, as ``_traced_merit`` is: a transformation applied without ``jit`` then traces
     the wrappers once and reuses the program (an eager ``jax.grad`` of the Fig. 1 point
@@ -2034,16 +2041,24 @@ def _sequential_merit(static, inputs):
     rule computes for a tangent anyway: a reverse-mode gradient.) Second derivatives go
     through that call's plain form (``with_batching_rule``): a Hessian is what it was.
     """
-    merit = functools.partial(_traced_merit, static)
+    by_design = one_at_a_time if sequential else (lambda fn: fn)
+    merit = by_design(functools.partial(_traced_merit, static))
+    finer = functools.partial(_traced_merit, gradient_static or static)
 
     @jax.custom_jvp
     def call(inputs):
-        return one_at_a_time(merit)(inputs)
+        return merit(inputs)
 
     def call_jvp(primals, tangents):
         (inputs,), (d_inputs,) = primals, tangents
         wrt, live = _live_tangents(d_inputs)
-        value, gradient = one_at_a_time(_value_and_grad(merit, wrt))(inputs)
+        value, gradient = by_design(_value_and_grad(finer, wrt))(inputs)
+        if gradient_static is not None:
+            value = merit(inputs)
+        if watch:
+            own = static.value[0]["se_nodes"][1]
+            jax.debug.callback(functools.partial(_warn_traced_gradient_snr, own),
+                               _peak_snr(*inputs[2:]))
         return value, _tangent(value, gradient, live)
 
     call.defjvp(call_jvp, symbolic_zeros=True)
@@ -2072,8 +2087,7 @@ def _gradient_static(static, spectra, grad_se_angular, auto):
         if is_concrete(spectra):
             # Concrete even inside a caller's jit, where the call would be staged out.
             with jax.ensure_compile_time_eval():
-                snr = float(_peak_snr(u, signal, noise))
-            count = _se_angular_for_snr(snr) if snr > CHECKED_SNR else None
+                count = _gradient_count(u, signal, noise)
         else:
             watch = True
     if count is None or count <= own:
@@ -2098,44 +2112,6 @@ def _warn_traced_gradient_snr(own, snr):
         f"values to {CHECKED_SNR_PEAKS:.0e}); pass grad_se_angular={count} "
         f"(jmse_jax.se_angular_for(u, signal, noise)), or se_angular, to jmse",
         UserWarning, stacklevel=2)
-
-
-@functools.partial(jax.jit, static_argnums=(0, 1, 2))
-def _refined_gradient_merit(static, gradient_static, watch, inputs):
-    """``_traced_entry(static, inputs)``, whose derivatives are those of
-    ``_traced_entry(gradient_static, inputs)`` (more angular fine S_e nodes,
-    ``_gradient_static``; ``static``'s own with None): the value does not change with
-    differentiation, and the gradient costs the finer program's ``value_and_grad`` plus
-    this value. ``watch``: every gradient checks the peak ``S_x / S_n`` and warns beyond
-    ``CHECKED_SNR`` (``_warn_traced_gradient_snr``; a host callback, about 0.1 ms). Derivative
-    rule and batching as ``_sequential_merit``'s: a reverse-mode gradient in the leaves
-    that carry a tangent, run design by design under ``vmap`` on
-    ``SEQUENTIAL_VMAP_BACKENDS``."""
-    merit = functools.partial(_traced_entry, static)
-    finer = functools.partial(_traced_merit, gradient_static or static)
-    sequential = jax.default_backend() in SEQUENTIAL_VMAP_BACKENDS
-
-    @jax.custom_jvp
-    def call(inputs):
-        return merit(inputs)
-
-    def call_jvp(primals, tangents):
-        (inputs,), (d_inputs,) = primals, tangents
-        wrt, live = _live_tangents(d_inputs)
-        value_and_grad = _value_and_grad(finer, wrt)
-        if sequential:
-            value_and_grad = one_at_a_time(value_and_grad)
-        value, gradient = value_and_grad(inputs)
-        if gradient_static is not None:
-            value = merit(inputs)
-        if watch:
-            own = static.value[0]["se_nodes"][1]
-            jax.debug.callback(functools.partial(_warn_traced_gradient_snr, own),
-                               _peak_snr(*inputs[2:]))
-        return value, _tangent(value, gradient, live)
-
-    call.defjvp(call_jvp, symbolic_zeros=True)
-    return call(inputs)
 
 
 def _prepare(arguments, options):
@@ -2415,6 +2391,14 @@ def _se_angular_for_snr(snr) -> int:
         if snr <= bound:
             return count
     return SE_ANGULAR_BY_SNR[-1][1]
+
+
+def _gradient_count(u, signal, noise):
+    """``SE_ANGULAR_BY_SNR``'s count at the peak ``S_x / S_n`` of these concrete spectra
+    where it is beyond ``CHECKED_SNR``; None within it, where the grids' own count holds
+    the gradient (``_gradient_static``, ``lens_merit`` and ``optimise``)."""
+    snr = float(_peak_snr(u, signal, noise))
+    return _se_angular_for_snr(snr) if snr > CHECKED_SNR else None
 
 
 def se_angular_for(u, signal, noise) -> int:

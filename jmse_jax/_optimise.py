@@ -24,13 +24,11 @@ import optimistix as optx
 
 from ._merit import (
     _GRID_OPTIONS,
-    CHECKED_SNR,
-    _peak_snr,
+    _gradient_count,
     _snr_peaks,
     _warn_beyond_checked_snr,
     jmse,
     jmse_options as _full_jmse_options,
-    se_angular_for,
 )
 from ._numerics import all_finite, check_choice, check_count, check_range, is_concrete
 from ._spectra import AbstractNoise, AbstractSignal, MarkovSignal, WhiteNoise
@@ -183,13 +181,13 @@ def _with_gradient_se_angular(jmse_options, u, signal, noise, key="se_angular"):
         return jmse_options
     try:
         options = _full_jmse_options(**jmse_options)
-        count = se_angular_for(u, signal, noise)
+        count = _gradient_count(u, signal, noise)
     except (TypeError, ValueError):
         return jmse_options  # refused with its own message by the checks that follow
     if not _snr_peaks(options["peaks"], options["tiers"]) or options["se_nodes"] is None:
         return jmse_options
     own = options["se_nodes"][1]
-    if float(_peak_snr(u, signal, noise)) > CHECKED_SNR and count > own:
+    if count is not None and count > own:
         return {**jmse_options, key: count}
     # Within CHECKED_SNR the grid's own count holds the gradient (se_angular_for gives
     # "high"'s 960 there, more than the 48 of "fast" with peaks=True, which holds it as it
