@@ -52,9 +52,11 @@ is ``CHECKED_SNR``, 2e6): it measures the preset where ``"high"`` claims to hold
 default warns (session 85). Adds ``_lownoise`` to the results' name.
 
 ``--se-angular`` runs the preset with ``se_angular=jj.se_angular_for(u, signal, noise)``,
-the count ``optimise`` gives ``"high"`` past ``CHECKED_SNR`` (session 86), against
-references with 4/3 and twice ``SE_ANGULAR_BY_SNR``'s largest count of angular fine nodes.
-Adds ``_se_angular`` to the results' name.
+the count ``optimise`` gives ``"high"`` past ``CHECKED_SNR`` (session 86), and since
+session 88 with ``otf_radial=jj.otf_radial_for(u, signal, noise)`` too, against
+references with 4/3 and twice ``SE_ANGULAR_BY_SNR``'s largest count of angular fine nodes
+and 8/5 and twice ``OTF_RADIAL_BY_SNR``'s largest count of radial OTF nodes. Adds
+``_se_angular`` to the results' name.
 
 Writes ``results/default_climb.json`` and ``.md`` (``--preset high``: ``default_climb_high``;
 ``--start``: ``default_climb_given``; ``--tag`` is appended to any name).
@@ -162,12 +164,14 @@ def _evaluate(row, preset, reference_grid=REFERENCE, gradient=False, snr_bound=N
     ``gradient``, ``error`` is the gradient's (``gradient_error``) and ``value_error`` the
     value's. With ``snr_bound`` the peak ``S_x / S_n`` is held to it instead of the
     preset's own bound (the peak-SNR warning is then ignored; the others still count).
-    With ``se_angular`` the preset runs with ``se_angular=jj.se_angular_for(...)`` of the
-    design's spectra (``optimise``'s choice for ``"high"``), kept as ``se_angular``."""
+    With ``se_angular`` the preset runs with ``se_angular=jj.se_angular_for(...)`` and
+    (since session 88) ``otf_radial=jj.otf_radial_for(...)`` of the design's spectra
+    (``optimise``'s choice for ``"high"``), kept as ``se_angular`` and ``otf_radial``."""
     design = _design(row)
     options = dict(preset=preset)
     if se_angular:
         options["se_angular"] = jj.se_angular_for(*design[2:])
+        options["otf_radial"] = jj.otf_radial_for(*design[2:])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         value = float(jj.jmse(*design, **options))
@@ -186,7 +190,7 @@ def _evaluate(row, preset, reference_grid=REFERENCE, gradient=False, snr_bound=N
                strength=float(jj.aberration_strength(*design[:3])),
                tier=route.get("tier"), path=route.get("path"),
                balanced=route.get("balanced"), one_ray=route.get("one_ray"),
-               se_angular=options.get("se_angular"))
+               se_angular=options.get("se_angular"), otf_radial=options.get("otf_radial"))
     if gradient:
         _, s = _sensitivities(row, options)
         _, s_ref = _sensitivities(row, reference_grid)
@@ -314,6 +318,12 @@ def main(argv=None):
         most = jj.SE_ANGULAR_BY_SNR[-1][1]
         reference_grid = dict(reference_grid, se_nodes=(8000, most * 4 // 3))
         finer_grid = dict(finer_grid, se_nodes=(9600, 2 * most))
+        # otf_radial_for gives up to OTF_RADIAL_BY_SNR's last count (160, the references'
+        # own since session 83): they have 8/5 and 2 times that (session 88).
+        radial = jj.OTF_RADIAL_BY_SNR[-1][1]
+        reference_grid = dict(reference_grid, nodes=(radial * 8 // 5,
+                                                     reference_grid["nodes"][1]))
+        finer_grid = dict(finer_grid, nodes=(2 * radial, finer_grid["nodes"][1]))
     start = time.perf_counter()
     sample = []
     for i in range(args.designs):

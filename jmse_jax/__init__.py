@@ -33,6 +33,7 @@ from ._merit import (
     HIGH_RAY_GRID as HIGH_RAY_GRID,
     HIGH_STEEP_GRID as HIGH_STEEP_GRID,
     HIGH_STRONG_STRENGTH as HIGH_STRONG_STRENGTH,
+    OTF_RADIAL_BY_SNR as OTF_RADIAL_BY_SNR,
     OVERLAP_FLOOR as OVERLAP_FLOOR,
     PRESETS as PRESETS,
     SE_ANGULAR_BY_SNR as SE_ANGULAR_BY_SNR,
@@ -43,6 +44,7 @@ from ._merit import (
     baseline_jmse as baseline_jmse,
     jmse as jmse,
     jmse_options as jmse_options,
+    otf_radial_for as otf_radial_for,
     se_angular_for as se_angular_for,
 )
 from ._optimise import (

@@ -80,6 +80,8 @@ __all__ = [
     "jmse",
     "jmse_options",
     "se_angular_for",
+    "otf_radial_for",
+    "OTF_RADIAL_BY_SNR",
 ]
 
 #: Largest Nyquist ratio accepted: at u = 1.5 the band's corners lie past the cutoff.
@@ -157,7 +159,8 @@ CHECKED_SNR = 2e6
 #: the 128 hold 1.4e-7; its seed 4 a gradient 3.0e-4 off, value 4.3e-7, at 1.2e7 on the
 #: own grid, whose 80 radial OTF nodes bind: 160 hold 5.2e-6; on that design at 2e8 the
 #: own grid's value is 3.2e-5 off, its gradient 6.9e-4, and 120 hold 8.4e-7 and 1.6e-5:
-#: benchmarks/README.md). Its gradients there
+#: benchmarks/README.md; since session 88 ``"high"`` takes 160 radial OTF nodes past
+#: ``CHECKED_SNR``, for values and gradients: ``OTF_RADIAL_BY_SNR``). Its gradients there
 #: were not held: up to 9.7e-2 off (value 9e-7) on a strong design near the cutoff (its
 #: balanced grid), where ``S_e`` turns from ``S_n / |H|^2`` to ``S_x`` along curves
 #: narrower than its 960 angular fine nodes (``HIGH_STEEP_GRID``'s counts there: 2.0e-2;
@@ -544,6 +547,16 @@ DEGREE_SE_NODES = (4800, 960)
 #: Options that fix the grid: overriding any of them turns the default's tiers off.
 _GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
                  "overlap_floor")
+#: Options that raise a count in every polar grid a call may take (``_with_floors``), as
+#: ``(option, grid entry, index in its pair)``: the angular fine S_e nodes and the radial
+#: OTF nodes, which low noise needs (``SE_ANGULAR_BY_SNR``, ``OTF_RADIAL_BY_SNR``). Each
+#: has a twin for the derivatives alone (``grad_`` + the name: ``_raised``).
+_FLOORS = (("se_angular", "se_nodes", 1), ("otf_radial", "nodes", 0))
+_FLOOR_WORDS = dict(se_angular="angular fine S_e nodes", otf_radial="radial OTF nodes")
+#: The floors that hold values as well as gradients: ``jmse`` takes these for both
+#: (``_auto_counts``), the others for the gradient alone.
+_VALUE_FLOORS = ("otf_radial",)
+_FLOOR_OPTIONS = tuple(name for floor, _, _ in _FLOORS for name in (floor, "grad_" + floor))
 #: Preset entries that are not ``jmse`` keywords.
 _PRESET_ONLY = ("tiers", "radial", "balanced", "steep", "ray")
 
@@ -578,13 +591,13 @@ PRESETS: dict[str, dict] = {
         quadrature="polar", nodes=(24, 16), se_nodes=(800, 48), otf_method="overlap",
         overlap_nodes=(28, 16), tiers=None, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=None, steep=None, ray=None,
-        se_angular=None, grad_se_angular=None,
+        se_angular=None, grad_se_angular=None, otf_radial=None, grad_otf_radial=None,
     ),
     "default": dict(
         quadrature="polar", nodes=(40, 20), se_nodes=(2400, 160), otf_method="overlap",
         overlap_nodes=(28, 24), tiers=DEFAULT_TIERS, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=False, balanced=BALANCED_GRID, steep=None, ray=None,
-        se_angular=None, grad_se_angular=None,
+        se_angular=None, grad_se_angular=None, otf_radial=None, grad_otf_radial=None,
     ),
     # 80 radial OTF nodes for H's (1 - r)^(3/2) edge on bands that reach the cutoff, 2800
     # radial S_e nodes for the ridges along the OTF's zeros at high SNR; each count differs
@@ -595,7 +608,7 @@ PRESETS: dict[str, dict] = {
         overlap_nodes=(48, 48), tiers=None, radial=True,
         overlap_floor=OVERLAP_FLOOR, peaks=True, balanced=HIGH_BALANCED_GRID,
         steep=HIGH_STEEP_GRID, ray=HIGH_RAY_GRID, se_angular=None,
-        grad_se_angular=None,
+        grad_se_angular=None, otf_radial=None, grad_otf_radial=None,
     ),
 }
 
@@ -646,7 +659,7 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
         check_count("nodes", nodes)
         options["nodes"] = int(nodes)
         options["se_nodes"] = None
-    for name in ("se_angular", "grad_se_angular"):
+    for name in _FLOOR_OPTIONS:
         if options[name] is None:
             continue
         check_count(name, options[name])
@@ -661,6 +674,11 @@ def jmse_options(preset: str = "default", **overrides) -> dict:
             raise ValueError(
                 f"{name} needs the polar rule's fine S_e nodes (quadrature='polar' with "
                 f"se_nodes), got quadrature={options['quadrature']!r}")
+        if name.endswith("otf_radial") and options[name] > options["se_nodes"][0]:
+            raise ValueError(
+                f"{name} must be at most se_nodes[0] = {options['se_nodes'][0]} (the OTF "
+                f"is interpolated from its nodes to the finer fine S_e nodes), got "
+                f"{name}={options[name]}")
     return options
 
 
@@ -1826,6 +1844,8 @@ def jmse(
     peaks: bool | None = None,
     se_angular: int | None = None,
     grad_se_angular: int | None = None,
+    otf_radial: int | None = None,
+    grad_otf_radial: int | None = None,
 ):
     """Predicted mean-squared error after Wiener restoration (JMSE), Berkner & Shroff Eq. (7).
 
@@ -1940,6 +1960,25 @@ def jmse(
         ratio: each gradient then checks it at run time and warns beyond
         ``CHECKED_SNR``, naming the count to give. Not with the default's tiers
         (``ValueError``); concrete calls, which return values only, ignore it.
+    otf_radial : int or None
+        At least this many radial OTF nodes in every polar grid the call may take, as
+        ``se_angular`` does for the angular fine S_e nodes (at most ``se_nodes[0]``). At
+        low noise under flat signal spectra the fine nodes' interpolation of ``H``
+        binds where ``S_e`` turns at small ``|H|``: ``"high"``'s own 80 left a gradient
+        3.0e-4 off at a peak ratio of 1.2e7 and a value 3.2e-5 at 2e8, its steep grid's
+        128 a gradient 3.3e-4 and a value 6.2e-5 at 2e8; 160 held them within 4e-7
+        (``otf_radial_for`` gives the count, ``OTF_RADIAL_BY_SNR``). ``"high"`` takes it
+        by itself, for the value and the gradient, where ``u`` and the spectra are
+        concrete at a peak ratio beyond ``CHECKED_SNR``, unless grid options or any of
+        the four counts are given. With them traced (a noise level swept under ``vmap``,
+        or an argument of your ``jit``) the value is its own grid's, and a gradient warns
+        at run time (``grad_se_angular``). Time: at the Fig. 1 point 160 radial OTF
+        nodes add about 50 ms to ``"high"``'s 72 ms value, and 65 ms to its 224 ms
+        ``value_and_grad`` with 1920 angular fine nodes (docs/accuracy.md).
+    grad_otf_radial : int or None
+        ``otf_radial`` for derivatives alone, as ``grad_se_angular`` is. Giving any of
+        ``se_angular``, ``grad_se_angular``, ``otf_radial`` or ``grad_otf_radial`` turns
+        ``"high"``'s own choice of both counts off.
 
     Returns
     -------
@@ -1987,15 +2026,18 @@ def jmse(
         jmse_options(preset, quadrature=quadrature, nodes=nodes, se_nodes=se_nodes,
                      otf_method=otf_method, overlap_nodes=overlap_nodes,
                      overlap_floor=overlap_floor, B=B, peaks=peaks, se_angular=se_angular,
-                     grad_se_angular=grad_se_angular))
+                     grad_se_angular=grad_se_angular, otf_radial=otf_radial,
+                     grad_otf_radial=grad_otf_radial))
     # A preset's grids (the grid options, when given, are the user's own sizing).
     preset_grid = all(v is None for v in (quadrature, nodes, se_nodes, otf_method,
                                           overlap_nodes, overlap_floor))
+    given = dict(se_angular=se_angular, grad_se_angular=grad_se_angular,
+                 otf_radial=otf_radial, grad_otf_radial=grad_otf_radial)
+    static, gradient_static, watch = _low_noise_statics(
+        static, (u, signal, noise), given, auto=preset_grid)
     if is_concrete(inputs):
         # On a design stronger than they were checked at: a warning.
         return _concrete_merit(static, inputs, warn=preset_grid)[0]
-    gradient_static, watch = _gradient_static(static, (u, signal, noise), grad_se_angular,
-                                              auto=preset_grid and se_angular is None)
     return _traced_entry(static, inputs, gradient_static, watch)
 
 
@@ -2011,7 +2053,7 @@ SEQUENTIAL_VMAP_BACKENDS = ("cpu",)
 def _traced_entry(static, inputs, gradient_static=None, watch=False):
     """``_traced_merit``, run design by design under ``vmap`` on the backends of
     ``SEQUENTIAL_VMAP_BACKENDS`` (the default backend's, at trace time), with the gradient
-    of ``gradient_static`` and the run-time check ``watch`` when ``_gradient_static`` asks
+    of ``gradient_static`` and the run-time check ``watch`` when ``jmse`` asks
     for them (``_merit_with_rule``)."""
     sequential = jax.default_backend() in SEQUENTIAL_VMAP_BACKENDS
     if not sequential and gradient_static is None and not watch:
@@ -2023,7 +2065,7 @@ def _traced_entry(static, inputs, gradient_static=None, watch=False):
 def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
     """``_traced_merit(static, inputs)`` under a derivative rule of its own: with
     ``sequential`` its ``vmap`` runs design by design, for the value and for first
-    derivatives alike; with ``gradient_static`` (``_gradient_static``: more angular fine S_e
+    derivatives alike; with ``gradient_static`` (``_raised``: more angular fine S_e
     nodes) its derivatives are that program's while the value stays ``static``'s, so it
     does not change with differentiation (the gradient costs the finer program's
     ``value_and_grad`` plus this value); with ``watch`` every gradient checks the peak
@@ -2056,7 +2098,7 @@ def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
         if gradient_static is not None:
             value = merit(inputs)
         if watch:
-            own = static.value[0]["se_nodes"][1]
+            own = tuple(_own_counts(static.value[0]).items())
             jax.debug.callback(functools.partial(_warn_traced_gradient_snr, own),
                                _peak_snr(*inputs[2:]))
         return value, _tangent(value, gradient, live)
@@ -2065,64 +2107,98 @@ def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
     return call(inputs)
 
 
-def _gradient_static(static, spectra, grad_se_angular, auto):
-    """``(gradient_static, watch)`` for ``jmse`` under tracing. ``gradient_static``: the
-    static of the program whose gradient ``jmse`` returns, when it is not ``static``'s own
-    (None otherwise), ``static`` with ``se_angular`` raised to ``grad_se_angular`` when that
-    is given, or, with ``auto`` (a preset's grids and no ``se_angular`` given), to
-    ``se_angular_for``'s count where ``static`` holds the peaks without the default's tiers
-    (``"high"``) and ``spectra``, the arguments ``(u, signal, noise)`` as given, are
-    concrete at a peak ``S_x / S_n`` beyond ``CHECKED_SNR`` (``"high"``'s own 960 angular
-    fine nodes hold its values to ``CHECKED_SNR_PEAKS`` but its gradients only to
-    ``CHECKED_SNR``: ``SE_ANGULAR_BY_SNR``). ``watch``: the same case with ``spectra``
-    traced, where the count cannot be chosen; a gradient then warns at run time beyond
-    ``CHECKED_SNR`` (``_warn_traced_gradient_snr``)."""
+def _low_noise_statics(static, spectra, given, auto):
+    """``(static, gradient_static, watch)`` of ``jmse``: ``static`` with the counts that
+    hold values raised, the static whose gradient ``jmse`` returns when it is not that
+    one's (None otherwise), and whether each gradient checks the peak ratio at run time.
+    ``given``: the four count options as given (``_FLOOR_OPTIONS``); with none of them and
+    ``auto`` (a preset's grids) the counts are ``_auto_counts``' (``otf_radial`` for
+    both, ``se_angular`` for the gradient), otherwise the ``grad_`` counts given raise the
+    gradient's (the others are in ``static`` already, ``_base_plans``)."""
+    auto = auto and all(n is None for n in given.values())
+    counts, watch = _auto_counts(static, spectra) if auto else (None, False)
+    # The radial OTF nodes hold the value as well as the gradient (OTF_RADIAL_BY_SNR).
+    static = _raised(static, {k: counts[k] for k in _VALUE_FLOORS} if counts else {}) or static
+    grads = counts if auto else {k: given["grad_" + k] for k, _, _ in _FLOORS}
+    return static, _raised(static, grads or {}), watch
+
+
+def _auto_counts(static, spectra):
+    """``(counts, watch)``: the counts ``jmse`` takes by itself (``_counts_for_snr``:
+    ``se_angular`` for the gradient, ``otf_radial`` for the value and the gradient) for a
+    call with a preset's grids and none of the counts given. Only where ``static`` holds
+    the peaks without the default's tiers (``"high"``, whose own counts hold its gradients
+    only to ``CHECKED_SNR``) and ``spectra``, the arguments ``(u, signal, noise)`` as
+    given, are concrete at a peak ``S_x / S_n`` beyond ``CHECKED_SNR``; None otherwise.
+    ``watch``: the same case with ``spectra`` traced, where the counts cannot be chosen
+    (grid sizes are static); a gradient then warns at run time beyond ``CHECKED_SNR``
+    (``_warn_traced_gradient_snr``)."""
+    options, tiers = static.value[0], static.value[1]
+    if options["se_nodes"] is None or not _snr_peaks(options["peaks"], tiers):
+        return None, False  # no fine polar grid, or the default's tiers
+    if not is_concrete(spectra):
+        return None, True
+    # Concrete even inside a caller's jit, where the call would be staged out.
+    with jax.ensure_compile_time_eval():
+        return _gradient_counts(*spectra), False
+
+
+def _raised(static, counts):
+    """``static`` with its floors (``_FLOORS``) raised to ``counts`` (``{floor: count or
+    None}``), or None when that raises no count of its own grid (``_own_counts``; the
+    branches of ``"high"`` have as many or more). With the default's tiers, which refuse
+    the floors, or without a fine polar grid: None."""
     options, tiers = static.value[0], static.value[1]
     if options["se_nodes"] is None or tiers is not None:
-        return None, False  # no fine polar grid, or the default's tiers (both refuse it)
-    own = max(options["se_nodes"][1], options["se_angular"] or 0)
-    count, watch = grad_se_angular, False
-    if count is None and auto and _snr_peaks(options["peaks"], tiers):
-        u, signal, noise = spectra
-        if is_concrete(spectra):
-            # Concrete even inside a caller's jit, where the call would be staged out.
-            with jax.ensure_compile_time_eval():
-                count = _gradient_count(u, signal, noise)
-        else:
-            watch = True
-    if count is None or count <= own:
-        return None, watch
-    return _Static(({**options, "se_angular": count},) + tuple(static.value[1:])), False
+        return None
+    own = _own_counts(options)
+    raised = {k: n for k, n in counts.items() if n is not None and n > own[k]}
+    if not raised:
+        return None
+    return _Static(({**options, **raised},) + tuple(static.value[1:]))
+
+
+def _own_counts(options):
+    """``{floor: count}``: the counts of ``options``'s own grid that ``_FLOORS`` raise, with
+    its floors applied (the branches of ``"high"`` have as many or more)."""
+    return {floor: max(options[entry][index], options[floor] or 0)
+            for floor, entry, index in _FLOORS}
 
 
 def _warn_traced_gradient_snr(own, snr):
     """The run-time warning of a gradient of ``"high"`` (the peaks without the default's
-    tiers) whose ``u`` or spectra were traced (``_gradient_static``'s ``watch``), at the
-    peak ratios ``snr`` (one per design); ``own``: the grid's angular fine S_e nodes."""
+    tiers) whose ``u`` or spectra were traced (``_auto_counts``'s ``watch``), at the
+    peak ratios ``snr`` (one per design); ``own``: ``_own_counts`` of the grid, as
+    ``((floor, count), ...)``."""
     snr = np.asarray(snr)
     snr = snr[np.isfinite(snr)]  # out-of-range inputs give +inf values and zero gradients
     if snr.size == 0 or snr.max() <= CHECKED_SNR:
         return
-    count = _se_angular_for_snr(float(snr.max()))
+    counts = _counts_for_snr(float(snr.max()))
+    own = dict(own)
+    give = ", ".join(f"grad_{floor}={counts[floor]}" for floor, _, _ in _FLOORS
+                     if counts[floor] > own[floor]) or "nothing more"
+    have = ", ".join(f"{own[floor]} {_FLOOR_WORDS[floor]}" for floor, _, _ in _FLOORS)
     warnings.warn(
         f"jmse's gradient at a peak S_x / S_n of {snr.max():.2g}, beyond {CHECKED_SNR:.0e}, "
-        f"with {own} angular fine S_e nodes: with u or the spectra traced jmse cannot choose "
-        f"the count that holds it (SE_ANGULAR_BY_SNR: {count} here), and preset='high''s "
-        f"own {SE_ANGULAR_BY_SNR[0][1]} hold its gradient only to {CHECKED_SNR:.0e} (its "
-        f"values to {CHECKED_SNR_PEAKS:.0e}); pass grad_se_angular={count} "
-        f"(jmse_jax.se_angular_for(u, signal, noise)), or se_angular, to jmse",
+        f"with {have}: with u or the spectra traced jmse cannot choose the counts that hold "
+        f"it (SE_ANGULAR_BY_SNR, OTF_RADIAL_BY_SNR), and preset='high''s own hold its "
+        f"gradient only to {CHECKED_SNR:.0e}; pass {give} (jmse_jax.se_angular_for, "
+        f"jmse_jax.otf_radial_for of (u, signal, noise)), or se_angular and otf_radial, "
+        f"to jmse",
         UserWarning, stacklevel=2)
 
 
 def _prepare(arguments, options):
     """``(static, inputs)`` of ``jmse`` for validated ``arguments`` and resolved options
-    (``grad_se_angular`` is ``jmse``'s own business, not part of the static)."""
+    (the ``grad_`` counts are ``jmse``'s own business, not part of the static)."""
     _validate(*arguments)
     aberrations, field, u, signal, noise = arguments
     dtype = common_dtype(*arguments)
     inputs = (aberrations, jnp.asarray(field, dtype), jnp.asarray(u, dtype), signal, noise)
     options = dict(options)
-    options.pop("grad_se_angular", None)
+    for floor, _, _ in _FLOORS:
+        options.pop("grad_" + floor, None)
     tiers = options.pop("tiers")
     radial = options.pop("radial") and _radial_applies(options, signal, noise)
     balanced = options.pop("balanced")  # None with a fixed grid (``jmse_options``)
@@ -2167,17 +2243,21 @@ def _base_plans(static, aberrations=None):
             balanced = {**balanced, **DEGREE_OVERLAP, "nodes": DEGREE_NODES,
                         "se_nodes": DEGREE_SE_NODES}
         plans = (*plans, ({**options, **balanced, "_remat_otf": _REMAT_OTF}, None))
-    if options.get("se_angular") is not None:
-        plans = tuple((_with_se_angular(plan, options["se_angular"]), shortcut)
-                      for plan, shortcut in plans)
+    if any(options.get(floor) is not None for floor, _, _ in _FLOORS):
+        plans = tuple((_with_floors(plan, options), shortcut) for plan, shortcut in plans)
     return plans
 
 
-def _with_se_angular(plan, se_angular):
-    """``plan`` with at least ``se_angular`` angular fine S_e nodes (``jmse``'s
-    ``se_angular``; the tiers' shortcuts never reach here, ``jmse_options``)."""
-    radial, angular = plan["se_nodes"]
-    return {**plan, "se_nodes": (radial, max(angular, se_angular))}
+def _with_floors(plan, options):
+    """``plan`` with at least ``options``'s ``se_angular`` angular fine S_e nodes and
+    ``otf_radial`` radial OTF nodes (``jmse``'s options, ``_FLOORS``; the tiers' shortcuts
+    never reach here, ``jmse_options``)."""
+    for floor, entry, index in _FLOORS:
+        if options.get(floor) is not None:
+            pair = list(plan[entry])
+            pair[index] = max(pair[index], options[floor])
+            plan = {**plan, entry: tuple(pair)}
+    return plan
 
 
 def _degree_program(aberrations):
@@ -2385,20 +2465,57 @@ SE_ANGULAR_BY_SNR = ((CHECKED_SNR, PRESETS["high"]["se_nodes"][1]), (2e7, 1920),
                      (CHECKED_SNR_PEAKS, 5760))
 
 
-def _se_angular_for_snr(snr) -> int:
-    """``SE_ANGULAR_BY_SNR``'s count for the peak ratio ``snr`` (its last beyond it)."""
-    for bound, count in SE_ANGULAR_BY_SNR:
+#: The radial OTF nodes (``jmse``'s ``otf_radial``) that hold ``"high"``'s value and
+#: gradient off the axis up to each peak ``S_x / S_n``, as ``(bound, count)`` pairs:
+#: ``otf_radial_for``. The fine S_e nodes interpolate ``H`` from the OTF nodes; where
+#: ``S_e`` turns from ``S_n / |H|^2`` to ``S_x``, at ``|H|^2 ~ S_n / S_x``, an error ``dH``
+#: moves it by ``2 dH / |H|``, so the lower the noise the more radial OTF nodes the turn
+#: needs. Calibrated in session 88 (``benchmarks/otf_radial.py``, against 256 radial OTF
+#: nodes) on session 87's two climb designs where they bound. On the own grid's (80;
+#: strength 12.7, u 0.70): gradient 8.3e-5 at a peak ratio of 2e6 and 3.2e-4 at 2e7, with
+#: 120 4.7e-7 and 8.2e-6, 160 the same digits. On ``HIGH_STEEP_GRID``'s (128; strength
+#: 24.2, u 0.84): 1.4e-6, 3.0e-5, 1.4e-4 and 3.3e-4 at 2e6, 2e7, 6e7 and 2e8 (value 6.2e-5
+#: there), with 160 5e-10, 1.7e-8, 8.7e-8 and 4.0e-7 (value 7.5e-8). Session 86's two
+#: designs (balanced and steep grids) change by less than 1e-8 with more. One count, 160
+#: (the balanced grid's own), beyond ``CHECKED_SNR``.
+OTF_RADIAL_BY_SNR = ((CHECKED_SNR, PRESETS["high"]["nodes"][0]), (CHECKED_SNR_PEAKS, 160))
+
+
+def _table_count(table, snr) -> int:
+    """The count of ``table`` (``(bound, count)`` pairs) for the peak ratio ``snr`` (its
+    last beyond it)."""
+    for bound, count in table:
         if snr <= bound:
             return count
-    return SE_ANGULAR_BY_SNR[-1][1]
+    return table[-1][1]
 
 
-def _gradient_count(u, signal, noise):
-    """``SE_ANGULAR_BY_SNR``'s count at the peak ``S_x / S_n`` of these concrete spectra
-    where it is beyond ``CHECKED_SNR``; None within it, where the grids' own count holds
-    the gradient (``_gradient_static``, ``lens_merit`` and ``optimise``)."""
+def _se_angular_for_snr(snr) -> int:
+    """``SE_ANGULAR_BY_SNR``'s count for the peak ratio ``snr``."""
+    return _table_count(SE_ANGULAR_BY_SNR, snr)
+
+
+def _counts_for_snr(snr) -> dict:
+    """``{floor: count}`` (``_FLOORS``) that hold ``"high"``'s gradient at the peak ratio
+    ``snr``: ``SE_ANGULAR_BY_SNR``'s and ``OTF_RADIAL_BY_SNR``'s."""
+    return dict(se_angular=_se_angular_for_snr(snr),
+                otf_radial=_table_count(OTF_RADIAL_BY_SNR, snr))
+
+
+def _gradient_counts(u, signal, noise):
+    """``_counts_for_snr`` at the peak ``S_x / S_n`` of these concrete spectra where it is
+    beyond ``CHECKED_SNR``; None within it, where the grids' own counts hold the gradient
+    (``_auto_counts``, ``lens_merit`` and ``optimise``)."""
     snr = float(_peak_snr(u, signal, noise))
-    return _se_angular_for_snr(snr) if snr > CHECKED_SNR else None
+    return _counts_for_snr(snr) if snr > CHECKED_SNR else None
+
+
+def _check_spectra(u, signal, noise):
+    check_range("u", u, 0.0, U_MAX, low_inclusive=False)
+    if not isinstance(signal, AbstractSignal):
+        raise TypeError(f"signal must be a jmse_jax signal model, got {type(signal)}")
+    if not isinstance(noise, AbstractNoise):
+        raise TypeError(f"noise must be a jmse_jax noise model, got {type(noise)}")
 
 
 def se_angular_for(u, signal, noise) -> int:
@@ -2408,41 +2525,48 @@ def se_angular_for(u, signal, noise) -> int:
     ``optimise`` takes it by itself for ``"high"``, and so do ``jmse``'s and ``lens_merit``'s
     gradients where ``u`` and the spectra are concrete (``grad_se_angular``); give it to
     gradients of your own whose ``u`` or spectra are traced, as ``jmse(...,
-    preset="high", grad_se_angular=se_angular_for(u, signal, noise))``. Its values are
-    held to ``CHECKED_SNR_PEAKS`` whatever the count."""
-    check_range("u", u, 0.0, U_MAX, low_inclusive=False)
-    if not isinstance(signal, AbstractSignal):
-        raise TypeError(f"signal must be a jmse_jax signal model, got {type(signal)}")
-    if not isinstance(noise, AbstractNoise):
-        raise TypeError(f"noise must be a jmse_jax noise model, got {type(noise)}")
+    preset="high", grad_se_angular=se_angular_for(u, signal, noise),
+    grad_otf_radial=otf_radial_for(u, signal, noise))``."""
+    _check_spectra(u, signal, noise)
     return _se_angular_for_snr(float(_peak_snr(u, signal, noise)))
 
 
+def otf_radial_for(u, signal, noise) -> int:
+    """The ``otf_radial`` (``jmse``'s option) that holds ``preset="high"``'s value and
+    gradient off the axis at the peak ``S_x / S_n`` of these spectra over the band of
+    ``u`` (``OTF_RADIAL_BY_SNR``): 80, ``"high"``'s own, up to ``CHECKED_SNR``, more
+    beyond. Taken as ``se_angular_for``'s count is (``optimise``; ``jmse``'s and
+    ``lens_merit``'s gradients where ``u`` and the spectra are concrete)."""
+    _check_spectra(u, signal, noise)
+    return _table_count(OTF_RADIAL_BY_SNR, float(_peak_snr(u, signal, noise)))
+
+
 def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient=False,
-                             se_angular=None):
+                             se_angular=None, otf_radial=None):
     """A ``UserWarning`` when the concrete spectra's peak ``S_x / S_n`` exceeds
     ``CHECKED_SNR`` (for calls with a preset's grids), or ``CHECKED_SNR_PEAKS`` with the
     closed-form peaks (``peaks``: ``_snr_peaks`` of the options, or a one-ray plan).
     ``gradient`` (``optimise``, which follows the gradient): with the peaks, a warning
-    between the two bounds too unless ``se_angular`` (the option) is at least
-    ``se_angular_for``'s count, since ``"high"``'s own 960 angular fine nodes hold its
-    gradient off the axis only to ``CHECKED_SNR``."""
+    between the two bounds too unless ``se_angular`` and ``otf_radial`` (the options) are
+    at least ``_counts_for_snr``'s, since ``"high"``'s own counts hold its gradient off the
+    axis only to ``CHECKED_SNR``."""
     snr = float(_peak_snr(u, signal, noise))
-    own = SE_ANGULAR_BY_SNR[0][1]  # "high"'s own count, which holds to CHECKED_SNR
+    given = dict(se_angular=se_angular or 0, otf_radial=otf_radial or 0)
+    needed = _counts_for_snr(snr)
     if (peaks and gradient and CHECKED_SNR < snr <= CHECKED_SNR_PEAKS
-            and (se_angular or 0) < _se_angular_for_snr(snr)):
+            and any(given[k] < n for k, n in needed.items())):
+        give = ", ".join(f"{k}={n}" for k, n in needed.items() if given[k] < n)
         warnings.warn(
             f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
-            f"gradients of the polar grids were checked at off the axis with "
-            f"{max(se_angular or 0, own)} angular fine S_e nodes ({CHECKED_SNR:.0e} with "
-            f"preset='high''s own {own}; its values hold to {CHECKED_SNR_PEAKS:.0e}): under a "
-            f"flat signal spectrum S_e "
-            f"turns from S_n/|H|^2 to S_x along narrow curves, and the gradient the "
-            f"optimiser follows may be off by percents where the value is right "
-            f"(preset='high' at 2e8: value 1e-6, gradient 1e-1; "
-            f"benchmarks/default_climb.py --preset high --gradient --noise). Give "
-            f"se_angular={_se_angular_for_snr(snr)} (jmse_options; jmse_jax.se_angular_for), "
-            f"which optimise takes by itself when se_angular is not given",
+            f"gradients of the polar grids were checked at off the axis with their own "
+            f"counts ({CHECKED_SNR:.0e} with preset='high''s {SE_ANGULAR_BY_SNR[0][1]} "
+            f"angular fine S_e nodes and {OTF_RADIAL_BY_SNR[0][1]} radial OTF nodes): under "
+            f"a flat signal spectrum S_e turns from S_n/|H|^2 to S_x along narrow curves, "
+            f"and the gradient the optimiser follows may be off by percents where the value "
+            f"is right (preset='high' at 2e8: value 1e-6, gradient 1e-1; "
+            f"benchmarks/default_climb.py --preset high --gradient --noise). Give {give} "
+            f"(jmse_options; jmse_jax.se_angular_for, otf_radial_for), which optimise takes "
+            f"by itself when none of se_angular, otf_radial and their grad_ twins is given",
             UserWarning, stacklevel=stacklevel)
         return
     if peaks:

@@ -23,8 +23,11 @@ import numpy as np
 import optimistix as optx
 
 from ._merit import (
+    _FLOOR_OPTIONS,
     _GRID_OPTIONS,
-    _gradient_count,
+    _VALUE_FLOORS,
+    _gradient_counts,
+    _own_counts,
     _snr_peaks,
     _warn_beyond_checked_snr,
     jmse,
@@ -126,10 +129,12 @@ def lens_merit(
         ``u`` becomes ``u s`` and the spectra ``S(nu / s) / s²`` with
         ``s = lambda N / reference_scale``.
     jmse_options : dict, optional, keyword options of ``jmse`` (e.g. ``{"preset": "fast"}``)
-        With ``"high"`` at a concrete peak ``S_x / S_n`` beyond ``CHECKED_SNR`` and neither
-        ``se_angular``, ``grad_se_angular`` nor grid options given, the gradient takes
-        ``grad_se_angular=se_angular_for(u, signal, noise)`` (``jmse``'s note): inside,
-        ``u`` and the spectra are traced, so ``jmse`` cannot choose it there.
+        With ``"high"`` at a concrete peak ``S_x / S_n`` beyond ``CHECKED_SNR`` and none
+        of the counts (``se_angular``, ``otf_radial``, their ``grad_`` twins) nor grid
+        options given, it takes ``otf_radial=otf_radial_for(u, signal, noise)`` and, for
+        the gradient, ``grad_se_angular=se_angular_for(u, signal, noise)`` (``jmse``'s
+        note): inside, ``u`` and the spectra are traced, so ``jmse`` cannot choose them
+        there.
 
     Returns
     -------
@@ -150,11 +155,11 @@ def lens_merit(
         if is_concrete(lens):
             _check_lens_at(lens, wavelengths)
         if merit == "jmse":
-            # "high"'s gradients at low noise (jmse's grad_se_angular); the value keeps
-            # the preset's grid. Inside _lens_merit_jit u and the spectra are traced (the
-            # band follows lambda N), so jmse cannot choose the count there itself.
-            jmse_options = _with_gradient_se_angular(jmse_options, u, signal, noise,
-                                                     key="grad_se_angular")
+            # "high"'s counts at low noise (jmse's otf_radial, grad_se_angular), as jmse
+            # takes them by itself. Inside _lens_merit_jit u and the spectra are traced
+            # (the band follows lambda N), so jmse cannot choose them there itself.
+            jmse_options = _with_gradient_counts(jmse_options, u, signal, noise,
+                                                 prefix="grad_")
     if reference_scale is not None:
         check_range("reference_scale", reference_scale, 0.0, None, low_inclusive=False)
         reference_scale = jnp.asarray(reference_scale, dtype)
@@ -164,36 +169,40 @@ def lens_merit(
     )
 
 
-def _with_gradient_se_angular(jmse_options, u, signal, noise, key="se_angular"):
-    """``jmse_options`` with ``key`` (``"se_angular"`` for ``optimise``, whose every value
-    comes with a gradient; ``"grad_se_angular"`` for ``lens_merit``, whose value keeps the
-    preset's grid) from ``se_angular_for`` where the gradient needs more angular fine S_e
-    nodes than the preset's: ``"high"`` (the peaks without the default's tiers) at a
-    concrete peak ``S_x / S_n`` beyond ``CHECKED_SNR``, with neither ``se_angular``,
-    ``grad_se_angular`` nor grid options given; within it, ``grad_se_angular`` at the
-    grid's own count (checked: no run-time check then). Anything else (bad arguments
-    included, which the checks then refuse) is returned as it is."""
+def _with_gradient_counts(jmse_options, u, signal, noise, prefix=""):
+    """``jmse_options`` with the counts of ``_gradient_counts`` (``otf_radial``, which
+    holds values too, and ``se_angular`` named with ``prefix``: ``""`` for ``optimise``,
+    whose every value comes with a gradient; ``"grad_"`` for ``lens_merit``, whose value
+    keeps the preset's angular count, as ``jmse``'s own choice does) where they are more
+    than the preset's own grid has: ``"high"`` (the
+    peaks without the default's tiers) at a concrete peak ``S_x / S_n`` beyond
+    ``CHECKED_SNR``, with none of these counts nor grid options given; within it,
+    ``grad_se_angular`` at the grid's own count (checked: no run-time check then).
+    Anything else (bad arguments included, which the checks then refuse) is returned as
+    it is."""
     if (jmse_options is None or not isinstance(jmse_options, dict)
-            or "se_angular" in jmse_options or "grad_se_angular" in jmse_options
-            or any(name in jmse_options for name in _GRID_OPTIONS)
+            or any(name in jmse_options for name in _FLOOR_OPTIONS + _GRID_OPTIONS)
             or not isinstance(signal, AbstractSignal) or not isinstance(noise, AbstractNoise)
             or not is_concrete((u, signal, noise))):
         return jmse_options
     try:
         options = _full_jmse_options(**jmse_options)
-        count = _gradient_count(u, signal, noise)
+        counts = _gradient_counts(u, signal, noise)
     except (TypeError, ValueError):
         return jmse_options  # refused with its own message by the checks that follow
     if not _snr_peaks(options["peaks"], options["tiers"]) or options["se_nodes"] is None:
         return jmse_options
-    own = options["se_nodes"][1]
-    if count is not None and count > own:
-        return {**jmse_options, key: count}
-    # Within CHECKED_SNR the grid's own count holds the gradient (se_angular_for gives
+    own = _own_counts(options)
+    # The radial OTF nodes hold the value too (jmse takes them for both by itself).
+    raised = {("" if k in _VALUE_FLOORS else prefix) + k: n
+              for k, n in (counts or {}).items() if n > own[k]}
+    if raised:
+        return {**jmse_options, **raised}
+    # Within CHECKED_SNR the grid's own counts hold the gradient (se_angular_for gives
     # "high"'s 960 there, more than the 48 of "fast" with peaks=True, which holds it as it
     # is). Saying so spares the gradients a run-time check of the ratio: inside
-    # _lens_merit_jit jmse sees u and the spectra traced (_merit._gradient_static's watch).
-    return {**jmse_options, "grad_se_angular": own}
+    # _lens_merit_jit jmse sees u and the spectra traced (_merit._auto_counts's watch).
+    return {**jmse_options, "grad_se_angular": own["se_angular"]}
 
 
 def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavelengths,
@@ -219,9 +228,10 @@ def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavel
         options = _full_jmse_options(**(jmse_options or {}))
         _warn_beyond_checked_snr(u, signal, noise, stacklevel=4,
                                  peaks=_snr_peaks(options["peaks"], options["tiers"]),
-                                 gradient=gradient, se_angular=max(
-                                     options["se_angular"] or 0,
-                                     options["grad_se_angular"] or 0) or None)
+                                 gradient=gradient, **{
+                                     floor: max(options[floor] or 0,
+                                                options["grad_" + floor] or 0) or None
+                                     for floor in ("se_angular", "otf_radial")})
     check_range("fields", fields, 0.0, 1.0)
     fields = jnp.asarray(fields, dtype)
     if fields.ndim != 1 or fields.shape[0] == 0:
@@ -649,11 +659,13 @@ def optimise(
         parameters and 2e-8 in the JMSE (``benchmarks/optimise_singlet.py``, 2026-12-03),
         with a first call of 10 s against 81 s on a 2-core CPU (compilation included; later
         starts take about a second either way). Pass ``{}`` for the default preset. With
-        ``"high"`` at a peak ``S_x / S_n`` beyond ``CHECKED_SNR`` (2e6) and neither
-        ``se_angular`` nor grid options given, ``se_angular=se_angular_for(u, signal,
-        noise)`` is added (up to 5760 angular fine S_e nodes at 2e8, where ``"high"``'s own
-        960 left the gradient up to 1e-1 off under flat spectra); the result's
-        ``jmse_options`` show it.
+        ``"high"`` at a peak ``S_x / S_n`` beyond ``CHECKED_SNR`` (2e6) and none of the
+        counts (``se_angular``, ``otf_radial``, their ``grad_`` twins) nor grid options
+        given, ``se_angular=se_angular_for(u, signal, noise)`` and
+        ``otf_radial=otf_radial_for(u, signal, noise)`` are added (up to 5760 angular fine
+        S_e nodes at 2e8, where ``"high"``'s own 960 left the gradient up to 1e-1 off under
+        flat spectra, and 160 radial OTF nodes, where its own 80 left it 3e-4 off); the
+        result's ``jmse_options`` show them.
     f_number : float, optional
         Solve the last curvature at every step so the working F-number stays at this value
         (Zemax's F-number solve; the paper's "F/4.6 singlet"). Do not also vary that
@@ -717,7 +729,7 @@ def optimise(
         check_range(f"scales[{name!r}]", scales[name], 0.0, None, low_inclusive=False)
     dtype = lens.ep_radius.dtype
     if merit == "jmse":
-        jmse_options = _with_gradient_se_angular(jmse_options, u, signal, noise)
+        jmse_options = _with_gradient_counts(jmse_options, u, signal, noise)
     fields, field_weights, wavelengths = _check_merit_arguments(
         dtype, u, signal, noise, fields, field_weights, wavelengths, jmse_options,
         gradient=merit == "jmse")

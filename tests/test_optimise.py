@@ -366,9 +366,9 @@ def test_noise_beyond_the_checked_snr_warns_in_lens_merit_and_optimise():
             with pytest.raises(ValueError, match="fields must be in"):
                 fn(**{**noisy, "noise": jmse_jax.WhiteNoise(1e-4)})  # 1.6e6
     # "high"'s values hold to CHECKED_SNR_PEAKS, its gradients off the axis with its own
-    # 960 angular fine nodes only to CHECKED_SNR (session 85's climbs): at 1.6e8 lens_merit
-    # does not warn, and optimise warns when told to keep 960 (it otherwise takes more by
-    # itself, tests/test_se_angular.py).
+    # counts (960 angular fine S_e nodes, 80 radial OTF nodes) only to CHECKED_SNR (sessions
+    # 85 and 87's climbs): at 1.6e8 lens_merit does not warn, and optimise warns when told to
+    # keep 960 (it otherwise takes more by itself, tests/test_se_angular.py).
     high = dict(noisy, noise=jmse_jax.WhiteNoise(1e-6), jmse_options={"preset": "high"})
     with warnings.catch_warnings():
         warnings.simplefilter("error")

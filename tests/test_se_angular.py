@@ -1,11 +1,14 @@
-"""``jmse``'s ``se_angular`` option, ``se_angular_for`` and ``optimise``'s own choice of it.
+"""``jmse``'s low-noise counts: ``se_angular`` and ``otf_radial`` (with their ``grad_`` twins),
+``se_angular_for``, ``otf_radial_for``, and the choice ``jmse``, ``lens_merit`` and
+``optimise`` make of them by themselves.
 
 ``se_angular`` raises the angular count of fine S_e nodes in every polar grid a preset may
 take without fixing the grid (its branches and one-ray plans stay). The oracle here is the
 same grid given explicitly: ``preset="fast", se_angular=n`` must be ``fast``'s grid with
-``se_nodes=(800, n)``, value and gradient. The count's calibration against converged grids
-(``"high"`` at peak ratios 2e6-2e8) is too heavy for the suite: ``benchmarks/default_climb.py
---preset high --gradient --noise``.
+``se_nodes=(800, n)``, value and gradient; ``otf_radial=n`` likewise with ``nodes=(n, 16)``.
+The counts' calibration against converged grids (``"high"`` at peak ratios 2e6-2e8) is too
+heavy for the suite: ``benchmarks/se_angular.py``, ``benchmarks/otf_radial.py`` and
+``benchmarks/default_climb.py --preset high --gradient --noise``.
 """
 
 import functools
@@ -26,13 +29,13 @@ from jmse_jax._merit import (  # noqa: E402
     HIGH_RAY_GRID,
     PRESETS,
     _base_plans,
-    _gradient_static,
+    _low_noise_statics,
     _prepare,
     _radial_plans,
     _tier_plans_of,
     jmse_options,
 )
-from jmse_jax._optimise import _with_gradient_se_angular  # noqa: E402
+from jmse_jax._optimise import _with_gradient_counts  # noqa: E402
 
 FIG1 = dict(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198)
 FAST = PRESETS["fast"]
@@ -76,6 +79,19 @@ def test_se_angular_is_the_preset_grid_with_more_angular_fine_nodes():
     assert float(grad[1]) == pytest.approx(float(grad_explicit[1]), rel=1e-11)
 
 
+def test_otf_radial_is_the_preset_grid_with_more_radial_otf_nodes():
+    """``fast`` with ``otf_radial=40`` is ``fast``'s grid given with ``nodes=(40, 16)``,
+    and a count below its own 24 changes nothing."""
+    design = _design()
+    raised = float(jj.jmse(*design, preset="fast", otf_radial=40))
+    explicit = float(jj.jmse(*design, se_nodes=FAST["se_nodes"],
+                             **dict(FAST_GRID, nodes=(40, FAST["nodes"][1]))))
+    assert raised == pytest.approx(explicit, rel=1e-13)
+    assert raised != float(jj.jmse(*design, preset="fast"))
+    assert float(jj.jmse(*design, preset="fast", otf_radial=8)) == float(
+        jj.jmse(*design, preset="fast"))
+
+
 def test_se_angular_below_the_preset_count_and_on_the_axis_changes_nothing():
     """A count below the grid's own keeps it (``max``), and a design on the axis keeps its
     one-ray plan (no angular nodes), whose value ``fast``'s ``se_angular`` leaves alone."""
@@ -90,24 +106,30 @@ def test_se_angular_below_the_preset_count_and_on_the_axis_changes_nothing():
 def test_se_angular_reaches_every_branch_of_high():
     """``"high"``'s own, steep and balanced grids all get the count (the balanced one of a
     Zernike design of high degree too, which replaces its S_e nodes by ``DEGREE_SE_NODES``);
-    the one-ray plan keeps ``HIGH_RAY_GRID``'s counts."""
+    the one-ray plan keeps ``HIGH_RAY_GRID``'s counts. ``otf_radial`` alike: each grid gets
+    at least that many radial OTF nodes (the balanced grid has more already)."""
     for aberrations in (jj.Seidel(**FIG1), jj.Zernike([0.3, 0.2, 0.1], noll=(4, 11, 22))):
         static, _ = _prepare((aberrations, 0.95, 0.2, jj.MarkovSignal(1.0, 5.0),
                               jj.WhiteNoise(1e-4)),
-                             jj.jmse_options("high", se_angular=4800))
+                             jj.jmse_options("high", se_angular=4800, otf_radial=144))
         plans = _base_plans(static, aberrations)
         assert len(plans) == 3  # own, steep, balanced
         for plan, _ in plans:
             assert plan["se_nodes"][1] == 4800
+        assert [plan["nodes"][0] for plan, _ in plans] == [
+            144, 144, (jj.DEGREE_NODES if isinstance(aberrations, jj.Zernike)
+                       else jj.HIGH_BALANCED_GRID["nodes"])[0]]
         assert {plan["se_nodes"][0] for plan, _ in plans} == {
             PRESETS["high"]["se_nodes"][0], jj.HIGH_STEEP_GRID["se_nodes"][0],
             (jj.DEGREE_SE_NODES if isinstance(aberrations, jj.Zernike)
              else jj.HIGH_BALANCED_GRID["se_nodes"])[0]}
         (ray, _), = _radial_plans(_tier_plans_of(static, plans), static.value[6])[0]
         assert ray["se_nodes"] == HIGH_RAY_GRID["se_nodes"]
+        assert ray["nodes"] == HIGH_RAY_GRID["nodes"]
 
 
-@pytest.mark.parametrize("name", ["se_angular", "grad_se_angular"])
+@pytest.mark.parametrize("name", ["se_angular", "grad_se_angular", "otf_radial",
+                                  "grad_otf_radial"])
 @pytest.mark.parametrize("kwargs, match", [
     (dict(preset="default", count=1920), r"{name} applies to fixed grids.*"
                                          r"{name}=1920 with preset='default'"),
@@ -117,11 +139,19 @@ def test_se_angular_reaches_every_branch_of_high():
     (dict(preset="high", quadrature="gauss", nodes=16, count=96),
      r"{name} needs the polar rule.*quadrature='gauss'"),
 ])
-def test_bad_angular_counts_are_refused(name, kwargs, match):
-    """``se_angular`` and ``grad_se_angular`` (session 87) are refused alike."""
+def test_bad_counts_are_refused(name, kwargs, match):
+    """``se_angular``, ``grad_se_angular`` (session 87), ``otf_radial`` and
+    ``grad_otf_radial`` (session 88) are refused alike."""
     kwargs = {(name if key == "count" else key): value for key, value in kwargs.items()}
     with pytest.raises(ValueError, match="(^|[^_])" + match.format(name=name)):
         jj.jmse(*_design(), **kwargs)
+
+
+@pytest.mark.parametrize("name", ["otf_radial", "grad_otf_radial"])
+def test_radial_counts_beyond_the_fine_nodes_are_refused(name):
+    with pytest.raises(ValueError, match=rf"^{name} must be at most se_nodes\[0\] = 800 .*"
+                                         rf"got {name}=801"):
+        jj.jmse(*_design(), preset="fast", **{name: 801})
 
 
 def test_se_angular_for_follows_the_peak_snr():
@@ -142,23 +172,40 @@ def test_se_angular_for_follows_the_peak_snr():
         jj.se_angular_for(-0.1, signal, jj.WhiteNoise(1e-3))
     with pytest.raises(TypeError, match="noise must be"):
         jj.se_angular_for(0.2, signal, 1e-3)
+    # The radial OTF nodes alike: "high"'s own 80 up to CHECKED_SNR, the table's beyond.
+    radial = [jj.otf_radial_for(0.2, signal, jj.WhiteNoise(peak / ratio))
+              for ratio in (1e3, 0.99 * CHECKED_SNR, 1.01 * CHECKED_SNR, CHECKED_SNR_PEAKS)]
+    assert radial[:2] == [80, 80] == [PRESETS["high"]["nodes"][0]] * 2
+    assert radial[2] > 80
+    assert radial == sorted(radial)
+    for (bound, count) in jj.OTF_RADIAL_BY_SNR:
+        assert jj.otf_radial_for(0.2, signal, jj.WhiteNoise(peak / bound * 1.0001)) == count
+    with pytest.raises(ValueError, match="u must be"):
+        jj.otf_radial_for(0.0, signal, jj.WhiteNoise(1e-3))
 
 
-def test_optimise_takes_se_angular_for_high_beyond_the_checked_snr():
-    """``optimise`` (through ``_with_gradient_se_angular``) gives ``"high"`` the count of
-    ``se_angular_for`` past ``CHECKED_SNR``, and nothing else: not below it, not for the
-    default or ``fast``, not when the caller gave ``se_angular`` or a grid."""
+def test_optimise_takes_the_counts_for_high_beyond_the_checked_snr():
+    """``optimise`` (through ``_with_gradient_counts``) gives ``"high"`` the counts of
+    ``se_angular_for`` and ``otf_radial_for`` past ``CHECKED_SNR``, and nothing else: not
+    below it, not for the default or ``fast``, not when the caller gave a count or a
+    grid."""
     signal = jj.MarkovSignal(1.0, 5.0)
     low, high_snr = jj.WhiteNoise(1e-3), jj.WhiteNoise(1e-6)  # 1.6e5, 1.6e8
     count = jj.se_angular_for(0.2, signal, high_snr)
-    assert count > 960
-    assert _with_gradient_se_angular({"preset": "high"}, 0.2, signal, high_snr) == {
-        "preset": "high", "se_angular": count}
+    radial = jj.otf_radial_for(0.2, signal, high_snr)
+    assert count > 960 and radial > 80
+    assert _with_gradient_counts({"preset": "high"}, 0.2, signal, high_snr) == {
+        "preset": "high", "se_angular": count, "otf_radial": radial}
+    # lens_merit's: the radial count holds the value too, so it is not the gradient's alone.
+    assert _with_gradient_counts({"preset": "high"}, 0.2, signal, high_snr,
+                                 prefix="grad_") == {
+        "preset": "high", "grad_se_angular": count, "otf_radial": radial}
     for options in ({"preset": "fast"}, {}, None, {"preset": "high", "se_angular": 1920},
+                    {"preset": "high", "grad_otf_radial": 120},
                     {"preset": "high", "se_nodes": (2800, 960)}):
-        assert _with_gradient_se_angular(options, 0.2, signal, high_snr) == options
+        assert _with_gradient_counts(options, 0.2, signal, high_snr) == options
     # Within it the own count, as checked (no run-time check of the ratio in the gradient).
-    assert _with_gradient_se_angular({"preset": "high"}, 0.2, signal, low) == {
+    assert _with_gradient_counts({"preset": "high"}, 0.2, signal, low) == {
         "preset": "high", "grad_se_angular": 960}
 
 
@@ -171,15 +218,21 @@ def test_optimise_warns_for_high_only_with_too_few_angular_nodes():
     lens = paper_singlet(1.0, 0.05)
     kwargs = dict(signal=jj.MarkovSignal(1.0, 5.0), noise=jj.WhiteNoise(1e-6), fields=(1.5,))
     count = jj.se_angular_for(0.2, kwargs["signal"], kwargs["noise"])
+    radial = jj.otf_radial_for(0.2, kwargs["signal"], kwargs["noise"])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match="fields must be in"):
             jj.optimise(lens, ("image_shift",), jmse_options={"preset": "high"}, **kwargs)
-    with pytest.warns(UserWarning, match=rf"1\.57e\+08 .* with 960 angular fine S_e nodes .* "
-                                         rf"Give se_angular={count}"):
+    with pytest.warns(UserWarning, match=rf"1\.57e\+08 .* with their own counts .* "
+                                         rf"Give se_angular={count}, otf_radial={radial} "):
         with pytest.raises(ValueError, match="fields must be in"):
             jj.optimise(lens, ("image_shift",),
                         jmse_options={"preset": "high", "se_angular": 960}, **kwargs)
+    # The angular count given, the radial count named alone.
+    with pytest.warns(UserWarning, match=rf"Give otf_radial={radial} "):
+        with pytest.raises(ValueError, match="fields must be in"):
+            jj.optimise(lens, ("image_shift",),
+                        jmse_options={"preset": "high", "se_angular": count}, **kwargs)
 
 
 def test_gradient_in_u_does_not_store_the_fine_grid():
@@ -245,69 +298,97 @@ def _relative(a, b):
 
 STEEP_C = jnp.array([STEEP[k] for k in ("w020", "w040", "w131", "w222", "w220")])
 STEEP_NOISE = STEEP_PEAK / 1.5e7  # se_angular_for: 1920
+STEEP_RADIAL = jj.otf_radial_for(STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(STEEP_NOISE))
 
 
 @functools.cache
-def _steep_gradient(se_angular):
-    """The gradient in the coefficients of the steep design with ``se_angular`` given (no
-    count of ``jmse``'s own on top): the oracles."""
-    return jax.grad(lambda c: _steep(c, STEEP_NOISE, se_angular=se_angular))(STEEP_C)
+def _steep_gradient(se_angular, otf_radial=None):
+    """The gradient in the coefficients of the steep design with ``se_angular`` (and
+    ``otf_radial``) given (no count of ``jmse``'s own on top): the oracles."""
+    return jax.grad(lambda c: _steep(c, STEEP_NOISE, se_angular=se_angular,
+                                     otf_radial=otf_radial))(STEEP_C)
 
 
 def test_gradient_takes_the_count_by_itself_with_concrete_spectra():
-    """Differentiated with ``u`` and the spectra concrete, the peaks without the tiers take
-    ``se_angular_for``'s count for the gradient alone: the gradient is the 1920 grid's, the
-    value the call's own (eager). With ``se_angular`` given nothing is added, below
-    ``CHECKED_SNR`` neither, and ``grad_se_angular`` given is taken with traced spectra too
-    (``_gradient_static``; the program is the same)."""
+    """With ``u`` and the spectra concrete, the peaks without the tiers take
+    ``otf_radial_for``'s count (session 88), and differentiated ``se_angular_for``'s for
+    the gradient alone: the gradient is the grid's with 1920 angular fine nodes and those
+    radial OTF nodes, the value that of the grid with those radial nodes and its own 48
+    angular ones, as the eager call's. With a count given nothing is added, below
+    ``CHECKED_SNR`` neither, and the ``grad_`` counts given are taken with traced spectra
+    too (``_low_noise_statics``; the program is the same)."""
     assert jj.se_angular_for(STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(STEEP_NOISE)) == 1920
-    own, fine = _steep_gradient(48), _steep_gradient(1920)
+    assert STEEP_RADIAL > PRESETS["fast"]["nodes"][0]
+    own, fine = _steep_gradient(48), _steep_gradient(1920, STEEP_RADIAL)
     assert _relative(own, fine) > 1e-2  # the preset's own count does not hold it
     value, grad = jax.jit(jax.value_and_grad(lambda c: _steep(c, STEEP_NOISE)))(STEEP_C)
     assert _relative(grad, fine) < 1e-12
     assert float(value) == pytest.approx(float(_steep(STEEP_C, STEEP_NOISE)), rel=1e-13)
+    assert float(value) == pytest.approx(
+        float(_steep(STEEP_C, STEEP_NOISE, otf_radial=STEEP_RADIAL)), rel=1e-13)
+    assert float(value) != float(_steep(STEEP_C, STEEP_NOISE, otf_radial=24))  # the own
     static, _ = _prepare(_design(), jmse_options(**PEAKED_FAST))
 
-    def choice(noise, given=None, auto=True):
-        chosen, watch = _gradient_static(static, (STEEP_U, STEEP_SIGNAL, noise), given, auto)
-        return None if chosen is None else chosen.value[0]["se_angular"], watch
+    def choice(noise, angular=None, radial=None, auto=True):
+        """The counts (angular, radial) of the value's and of the gradient's programs (None
+        where the gradient's is the value's), and the run-time check."""
+        given = dict.fromkeys(("se_angular", "otf_radial"), None)
+        given.update(grad_se_angular=angular, grad_otf_radial=radial)
+        value, gradient, watch = _low_noise_statics(
+            static, (STEEP_U, STEEP_SIGNAL, noise), given, auto)
 
-    assert choice(jj.WhiteNoise(STEEP_NOISE)) == (1920, False)
-    assert choice(jj.WhiteNoise(100 * STEEP_NOISE)) == (None, False)  # 1.5e5
-    assert choice(jj.WhiteNoise(STEEP_NOISE), auto=False) == (None, False)  # se_angular given
+        def counts(chosen):
+            return None if chosen is None else (chosen.value[0]["se_angular"],
+                                                chosen.value[0]["otf_radial"])
+        return counts(value), counts(gradient), watch
 
-    def traced(given=None):  # the choice with the noise level a tracer
+    # The radial count holds the value too, the angular one the gradient alone.
+    assert choice(jj.WhiteNoise(STEEP_NOISE)) == (
+        (None, STEEP_RADIAL), (1920, STEEP_RADIAL), False)
+    assert choice(jj.WhiteNoise(100 * STEEP_NOISE)) == ((None, None), None, False)  # 1.5e5
+    # A grid option given (auto off): nothing.
+    assert choice(jj.WhiteNoise(STEEP_NOISE), auto=False) == ((None, None), None, False)
+
+    def traced(**given):  # the choice with the noise level a tracer
         out = []
-        jax.make_jaxpr(lambda n: out.append(choice(jj.WhiteNoise(n), given)) or n)(
+        jax.make_jaxpr(lambda n: out.append(choice(jj.WhiteNoise(n), **given)) or n)(
             STEEP_NOISE)
         return out[0]
 
-    assert traced() == (None, True)
-    assert traced(given=1920) == (1920, False)
-    assert traced(given=32) == (None, False)  # below the grid's own 48
+    assert traced() == ((None, None), None, True)
+    assert traced(angular=1920) == ((None, None), (1920, None), False)
+    assert traced(radial=96) == ((None, None), (None, 96), False)
+    # Below the grid's own 48 and 24: nothing, and no run-time check (the counts are given).
+    assert traced(angular=32, radial=16) == ((None, None), None, False)
 
 
 def test_traced_spectra_warn_at_run_time():
     """With the noise traced (an argument of the caller's ``jit``, differentiated, here
-    under ``vmap``) the count cannot be chosen: each gradient checks the peak ratio when it
-    runs and warns beyond ``CHECKED_SNR``, naming the count; inside it, silence. The
-    gradient is the call's own grid's."""
+    under ``vmap``) the counts cannot be chosen: each gradient checks the peak ratio when
+    it runs and warns beyond ``CHECKED_SNR``, naming the counts; inside it, silence. The
+    value and the gradient are the call's own grid's."""
     program = jax.jit(jax.vmap(jax.value_and_grad(_steep, argnums=(0, 1)), in_axes=(None, 0)))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         jax.block_until_ready(program(STEEP_C, jnp.full(2, 100 * STEEP_NOISE)))
     with pytest.warns(UserWarning, match=r"peak S_x / S_n of 1\.5e\+07.*with 48 angular fine "
-                                         r"S_e nodes.*pass grad_se_angular=1920"):
+                                         r"S_e nodes, 24 radial OTF nodes.*pass "
+                                         rf"grad_se_angular=1920, grad_otf_radial="
+                                         rf"{STEEP_RADIAL} "):
         value, (grad, _) = program(STEEP_C, jnp.array([100 * STEEP_NOISE, STEEP_NOISE]))
         jax.block_until_ready(grad)
     assert _relative(grad[1], _steep_gradient(48)) < 1e-12
-    assert float(value[1]) == pytest.approx(float(_steep(STEEP_C, STEEP_NOISE)), rel=1e-13)
+    # The value too is the own grid's (24 radial OTF nodes; a count given turns the
+    # choice off), not the eager call's, which takes the radial count.
+    assert float(value[1]) == pytest.approx(
+        float(_steep(STEEP_C, STEEP_NOISE, otf_radial=24)), rel=1e-13)
 
 
 def test_lens_merit_passes_the_count_on(monkeypatch):
     """``lens_merit`` traces ``u`` and the spectra inside (the band follows ``lambda N``),
-    so it chooses the count from its concrete arguments and gives it to ``jmse`` as
-    ``grad_se_angular`` (what ``jmse`` does with it is the tests' above); within
+    so it chooses the counts from its concrete arguments and gives them to ``jmse`` as
+    ``grad_se_angular`` and ``otf_radial`` (what ``jmse`` does with them is the tests'
+    above); within
     ``CHECKED_SNR`` the grid's own 48, which spares the gradient its run-time check.
     ``optimise`` keeps a count the caller gave."""
     import jmse_jax._optimise as optimise_module
@@ -321,11 +402,13 @@ def test_lens_merit_passes_the_count_on(monkeypatch):
 
     monkeypatch.setattr(optimise_module, "jmse", spy)
     noise = jj.WhiteNoise(STEEP_NOISE)
-    for level, count in ((noise, 1920), (jj.WhiteNoise(100 * STEEP_NOISE), 48)):
+    for level, count, radial in ((noise, 1920, STEEP_RADIAL),
+                                 (jj.WhiteNoise(100 * STEEP_NOISE), 48, None)):
         seen.clear()
         jax.grad(lambda s, level=level: jj.lens_merit(
             paper_singlet(1.0, 0.05, image_shift=s), u=STEEP_U, signal=STEEP_SIGNAL,
             noise=level, fields=(1.0,), jmse_options=PEAKED_FAST))(0.0)
-        assert seen and all(o.get("grad_se_angular") == count for o in seen), seen
+        assert seen and all(o.get("grad_se_angular") == count
+                            and o.get("otf_radial") == radial for o in seen), seen
     given = dict(PEAKED_FAST, grad_se_angular=960)  # the caller's: kept, by optimise too
-    assert _with_gradient_se_angular(given, STEEP_U, STEEP_SIGNAL, noise) == given
+    assert _with_gradient_counts(given, STEEP_U, STEEP_SIGNAL, noise) == given

@@ -1,0 +1,172 @@
+"""How many radial OTF nodes ``"high"``'s grids need at low noise (``otf_radial``).
+
+Session 87's climbs of ``"high"`` with ``se_angular_for``'s count
+(``default_climb.py --preset high --gradient --se-angular --noise -9.5 -6.5``, seeds 3
+and 4) found two designs where the count held nothing: their radial OTF nodes bound. Under
+a flat signal spectrum at high SNR, ``S_e`` turns from ``S_n / |H|^2`` to ``S_x`` where
+``|H|^2 S_x / S_n`` falls through 1; the fine S_e nodes interpolate ``H`` from the OTF
+nodes, and an interpolation error ``dH`` moves ``S_e ~ S_n / |H|^2`` by ``2 dH / |H|``,
+so the finer the turn (the larger ``S_x / S_n``, the smaller the ``|H|`` it sits at), the
+more radial OTF nodes it needs, for the value as well as the gradient. This script takes
+those two designs and session 86's two (``se_angular.py``), sets the noise to several peak
+ratios, and measures the error of the value and of the gradient
+(``default_climb.gradient_error``) of the grid each design takes in ``"high"``, with
+``se_angular_for``'s angular count, against the radial OTF counts tried, with a reference
+of ``--reference`` radial OTF nodes and finer counts elsewhere (``REFERENCE``).
+
+Usage (from the repository root; about 45 min on 2 cores)::
+
+    .venv/bin/python benchmarks/otf_radial.py [--reference 256]
+    .venv/bin/python benchmarks/otf_radial.py --timing
+
+Writes ``results/otf_radial.json`` and ``.md`` (``--timing``: ``otf_radial_timing``,
+``"high"``'s cost with the counts at the Fig. 1 point).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import _common as common  # noqa: E402 - turns on float64
+import default_climb as dc  # noqa: E402
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import se_angular as sa  # noqa: E402
+
+import jmse_jax as jj  # noqa: E402
+
+#: Session 87's two designs (``results/default_climb_high_powerlaw_lownoise_se_angular_
+#: gradient_seed{3,4}.json``, the worst of climb 1 and of climb 2), beside session 86's.
+DESIGNS = {
+    **{name: spec["row"] for name, spec in sa.DESIGNS.items()},
+    "seed3": dict(scale=8.0, coefficients=dict(
+        w020=2.026897570257605, w040=4.78166315946895, w131=-3.901791582308874,
+        w222=-2.4631120182371133, w220=-4.198629083817106), field=0.1444528670747427,
+        u=0.8421598724080679, amplitude=0.005549018796790858, exponent=2.04865410144773,
+        knee=0.2167542987927513, noise=2.0363257009082733e-09),
+    "seed4": dict(scale=4.0, coefficients=dict(
+        w020=-1.5746692151060033, w040=-1.6933111332999435, w131=3.657237327590245,
+        w222=2.33420283810366, w220=0.8216474483682494), field=0.619410278353009,
+        u=0.7037803930463804, amplitude=0.0004522955935425895, exponent=1.7143066600902044,
+        knee=0.28414584464841935, noise=3.1622776601683795e-10),
+}
+RATIOS = (2e6, 2e7, 6e7, 2e8)
+COUNTS = (80, 120, 160, 192, 256)
+#: Finer than every ``"high"`` grid and than every count tried except in the radial OTF
+#: nodes, which ``--reference`` sets (the climbs' reference has 160).
+REFERENCE = dict(nodes=(256, 64), se_nodes=(8000, 7680), overlap_nodes=(128, 128),
+                 overlap_floor=128, peaks=True)
+
+
+def calibrate(reference, counts=COUNTS, ratios=RATIOS, designs=DESIGNS):
+    rows = []
+    ref_grid = dict(REFERENCE, nodes=(reference, REFERENCE["nodes"][1]))
+    for name, base in designs.items():
+        plan, grid = sa._grid_taken(base)
+        own = grid["nodes"][0]
+        for ratio in ratios:
+            row = sa._with_ratio(base, ratio)
+            angular = max(grid["se_nodes"][1], jj.se_angular_for(*dc._design(row)[2:]))
+            start = time.perf_counter()
+            value_ref, s_ref = dc._sensitivities(row, ref_grid)
+            for n in sorted({own, *(c for c in counts if c > own)}):
+                options = dict(grid, nodes=(n, grid["nodes"][1]),
+                               se_nodes=(grid["se_nodes"][0], angular))
+                value, s = dc._sensitivities(row, options)
+                rows.append(dict(design=name, plan=plan, ratio=ratio, se_angular=angular,
+                                 otf_radial=n, own=own,
+                                 gradient_error=dc.gradient_error(s, s_ref),
+                                 value_error=abs(value / value_ref - 1.0)))
+                print(f"{name} ({plan}, own {own}) ratio {ratio:.3g} angular {angular} "
+                      f"radial {n}: gradient {rows[-1]['gradient_error']:.2e} value "
+                      f"{rows[-1]['value_error']:.1e} [{time.perf_counter() - start:.0f} s]",
+                      flush=True)
+            # Each program keeps its constants (the fine stage's interpolation tables):
+            # cached for the whole run they exhausted 24 GB after about 50.
+            dc._gradient_program.cache_clear()
+            jax.clear_caches()
+    return rows
+
+
+#: The option sets ``--timing`` runs: ``"high"``'s own grid, with ``otf_radial_for``'s count
+#: alone (a value of ``jmse`` past ``CHECKED_SNR``), and ``se_angular_for``'s counts at two
+#: ratios with and without ``otf_radial_for``'s, on values and gradients
+#: (``se_angular``, ``otf_radial``: ``optimise``) or on the gradient alone (the ``grad_``
+#: twins: ``jmse``'s and ``lens_merit``'s own choice).
+TIMING_RUNS = ({}, dict(otf_radial=160), dict(se_angular=1920),
+               dict(se_angular=1920, otf_radial=160),
+               dict(grad_se_angular=1920, grad_otf_radial=160), dict(se_angular=5760),
+               dict(se_angular=5760, otf_radial=160),
+               dict(grad_se_angular=5760, grad_otf_radial=160))
+
+
+def timing(runs=TIMING_RUNS):
+    """Warm jitted times of ``"high"`` with each option set of ``runs`` at the Fig. 1
+    point: the value, and ``value_and_grad`` in the coefficients (gradient-only sets: the
+    latter alone, since their value is ``"high"``'s own)."""
+    c0 = jnp.array([common.FIG1[k] for k in dc.TERMS])
+    args = (c0, jnp.asarray(common.FIG1_U), jnp.asarray(1e-3))
+    out = []
+    for options in runs:
+        def merit(c, u, noise, options=options):
+            return jj.jmse(jj.Seidel(*c), common.FIG1_FIELD, u, common.fig1_signal(),
+                           jj.WhiteNoise(noise), preset="high", **options)
+
+        gradient_only = any(k.startswith("grad_") for k in options)
+        modes = (("value", merit), ("value_and_grad (coefficients)", jax.value_and_grad(merit)))
+        for mode, fn in modes[gradient_only:]:
+            timed = common.time_compiled(fn, args)
+            out.append(dict(options=options, mode=mode, seconds=timed["warm_s"],
+                            compile_s=timed["compile_s"]))
+            print(f"{options or 'high'} {mode}: {timed['warm_s'] * 1e3:.1f} ms, compile "
+                  f"{timed['compile_s']:.1f} s", flush=True)
+    return out
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--reference", type=int, default=256,
+                        help="radial OTF nodes of the reference grid")
+    parser.add_argument("--timing", action="store_true",
+                        help="time 'high' with the counts instead (results/otf_radial_timing)")
+    args = parser.parse_args(argv)
+    machine = common.machine_info()
+    if args.timing:
+        times = timing()
+        lines = ["# `high`'s cost with the low-noise counts (`se_angular`, `otf_radial`)", "",
+                 "`python benchmarks/otf_radial.py --timing`", "",
+                 common.machine_line(machine, common.load_average()), "",
+                 "Fig. 1 point, `high`, warm and jitted (`_common.time_compiled`: median), "
+                 "float64:", "", "| options | call | time | compile |", "|---|---|---|---|"]
+        for t in times:
+            lines.append(f"| {t['options'] or '(own grid)'} | {t['mode']} | "
+                         f"{t['seconds'] * 1e3:.1f} ms | {t['compile_s']:.1f} s |")
+        print("\n".join(lines))
+        common.write_report("otf_radial_timing", dict(machine=machine, timing=times), lines)
+        return
+    rows = calibrate(args.reference)
+    lines = ["# `high`'s value and gradient at low noise against its radial OTF nodes", "",
+             f"`python benchmarks/otf_radial.py --reference {args.reference}`", "",
+             common.machine_line(machine, common.load_average()), "",
+             f"Reference: {dict(REFERENCE, nodes=(args.reference, REFERENCE['nodes'][1]))}. "
+             "Each design on the grid it takes in `high`, with `se_angular_for`'s angular "
+             "count and the radial OTF nodes given.", "",
+             "| design (plan, own radial) | peak S_x/S_n | se_angular | radial OTF nodes | "
+             "gradient's error | value's error |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['design']} ({r['plan']}, {r['own']}) | {r['ratio']:.3g} | "
+                     f"{r['se_angular']} | {r['otf_radial']} | {r['gradient_error']:.2e} | "
+                     f"{r['value_error']:.1e} |")
+    print("\n".join(lines))
+    common.write_report("otf_radial", dict(machine=machine, reference=args.reference,
+                                           rows=rows), lines)
+
+
+if __name__ == "__main__":
+    main()
