@@ -18,9 +18,11 @@ Usage (from the repository root; about 45 min on 2 cores)::
 
     .venv/bin/python benchmarks/otf_radial.py [--reference 256]
     .venv/bin/python benchmarks/otf_radial.py --timing
+    .venv/bin/python benchmarks/otf_radial.py --recheck   # about 5 min
 
 Writes ``results/otf_radial.json`` and ``.md`` (``--timing``: ``otf_radial_timing``,
-``"high"``'s cost with the counts at the Fig. 1 point).
+``"high"``'s cost with the counts at the Fig. 1 point; ``--recheck``: ``otf_radial_recheck``,
+session 87's climbs' worst designs run again with the counts).
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ import jax.numpy as jnp  # noqa: E402
 import se_angular as sa  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
+from jmse_jax._merit import _peak_snr  # noqa: E402
 
 #: Session 87's two designs (``results/default_climb_high_powerlaw_lownoise_se_angular_
 #: gradient_seed{3,4}.json``, the worst of climb 1 and of climb 2), beside session 86's.
@@ -129,14 +132,84 @@ def timing(runs=TIMING_RUNS):
     return out
 
 
+#: Session 87's climbs (``default_climb.py --preset high --gradient --se-angular --noise
+#: -9.5 -6.5 --seed 3/4``): their results, whose worst designs ``--recheck`` runs again.
+CLIMBS = tuple(f"default_climb_high_powerlaw_lownoise_se_angular_gradient_seed{seed}.json"
+               for seed in (3, 4))
+
+
+def recheck(reference, names=CLIMBS):
+    """The worst design of each climb in ``names`` at its own noise, with what ``optimise``
+    now gives ``"high"`` (``se_angular_for``'s and ``otf_radial_for``'s counts) against the
+    reference (``REFERENCE`` with ``reference`` radial OTF nodes), beside the error the
+    climb found; and the value of an eager ``jmse(..., preset="high")``, which takes the
+    radial count by itself."""
+    import json
+    import warnings
+
+    ref_grid = dict(REFERENCE, nodes=(reference, REFERENCE["nodes"][1]))
+    rows = []
+    for name in names:
+        climbs = json.loads((HERE / "results" / name).read_text())["climbs"]
+        for i, climb in enumerate(climbs):
+            worst = climb.get("worst", climb)
+            row = {k: worst[k] for k in ("scale", "coefficients", "field", "u", "amplitude",
+                                         "exponent", "knee", "noise")}
+            design = dc._design(row)
+            options = dict(preset="high", se_angular=jj.se_angular_for(*design[2:]),
+                           otf_radial=jj.otf_radial_for(*design[2:]))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # beyond CHECKED_SNR, as the climbs allowed
+                value, s = dc._sensitivities(row, options)
+                value_ref, s_ref = dc._sensitivities(row, ref_grid)
+                eager = float(jj.jmse(*design, preset="high"))
+            rows.append(dict(
+                climbs=name, climb=i, peak_snr=float(_peak_snr(*design[2:])),
+                strength=worst["strength"], u=row["u"], options=options,
+                climb_error=worst["error"], climb_value_error=worst["value_error"],
+                gradient_error=dc.gradient_error(s, s_ref),
+                value_error=abs(value / value_ref - 1.0),
+                eager_value_error=abs(eager / value_ref - 1.0)))
+            print(rows[-1], flush=True)
+            dc._gradient_program.cache_clear()
+            jax.clear_caches()
+    return rows
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--reference", type=int, default=256,
                         help="radial OTF nodes of the reference grid")
     parser.add_argument("--timing", action="store_true",
                         help="time 'high' with the counts instead (results/otf_radial_timing)")
+    parser.add_argument("--recheck", action="store_true",
+                        help="run session 87's climbs' worst designs again with the counts "
+                             "(results/otf_radial_recheck)")
     args = parser.parse_args(argv)
     machine = common.machine_info()
+    if args.recheck:
+        rows = recheck(args.reference)
+        lines = ["# Session 87's worst low-noise designs of `high`, with the counts", "",
+                 f"`python benchmarks/otf_radial.py --recheck --reference {args.reference}`",
+                 "", common.machine_line(machine, common.load_average()), "",
+                 "Each climb's worst design at its own noise with `se_angular_for`'s and "
+                 "`otf_radial_for`'s counts (what `optimise` gives `high`), against "
+                 f"{dict(REFERENCE, nodes=(args.reference, REFERENCE['nodes'][1]))}; the "
+                 "errors the climb found (with `se_angular` alone) beside them; the eager "
+                 "value takes the radial count by itself.", "",
+                 "| climbs | climb | peak S_x/S_n | strength | u | counts | gradient's error "
+                 "(climb's) | value's error (climb's) | eager value's error |",
+                 "|---|---|---|---|---|---|---|---|---|"]
+        for r in rows:
+            lines.append(
+                f"| {r['climbs']} | {r['climb']} | {r['peak_snr']:.3g} | {r['strength']:.1f} "
+                f"| {r['u']:.2f} | {r['options']['se_angular']} / "
+                f"{r['options']['otf_radial']} | {r['gradient_error']:.2e} "
+                f"({r['climb_error']:.2e}) | {r['value_error']:.1e} "
+                f"({r['climb_value_error']:.1e}) | {r['eager_value_error']:.1e} |")
+        print("\n".join(lines))
+        common.write_report("otf_radial_recheck", dict(machine=machine, rows=rows), lines)
+        return
     if args.timing:
         times = timing()
         lines = ["# `high`'s cost with the low-noise counts (`se_angular`, `otf_radial`)", "",

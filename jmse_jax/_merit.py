@@ -2215,6 +2215,10 @@ def _route(aberrations, field, u, signal, noise, **options):
     plan runs, ``jmse_jax._radial``) and ``path`` (the shortcut's ``"first"`` or ``"trial"``
     grid, or the plan's own ``"grid"``); and the ``value`` it returns. For the benchmarks."""
     static, inputs = _prepare((aberrations, field, u, signal, noise), jmse_options(**options))
+    # The counts jmse takes by itself at low noise (the plans' indices do not change).
+    static, _, _ = _low_noise_statics(
+        static, (u, signal, noise), {k: options.get(k) for k in _FLOOR_OPTIONS},
+        auto=not any(options.get(k) is not None for k in _GRID_OPTIONS))
     value, index, symmetric, path = _concrete_merit(static, inputs)
     tiers, balanced, steep = static.value[1], static.value[4], static.value[5]
     takes_balanced = (balanced is not None and not symmetric

@@ -298,7 +298,20 @@ def _relative(a, b):
 
 STEEP_C = jnp.array([STEEP[k] for k in ("w020", "w040", "w131", "w222", "w220")])
 STEEP_NOISE = STEEP_PEAK / 1.5e7  # se_angular_for: 1920
-STEEP_RADIAL = jj.otf_radial_for(STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(STEEP_NOISE))
+#: ``OTF_RADIAL_BY_SNR``'s count past ``CHECKED_SNR`` in the tests that compile the steep
+#: design (``small_radial_table``): the mechanism is the same as with the real 160, which
+#: would give ``fast`` 160 radial OTF nodes in place of its 24 and make those tests twice as
+#: slow (session 88: 69 and 44 s).
+STEEP_RADIAL = 32
+
+
+@pytest.fixture
+def small_radial_table(monkeypatch):
+    import jmse_jax._merit as merit_module
+
+    monkeypatch.setattr(merit_module, "OTF_RADIAL_BY_SNR",
+                        ((CHECKED_SNR, PRESETS["high"]["nodes"][0]),
+                         (CHECKED_SNR_PEAKS, STEEP_RADIAL)))
 
 
 @functools.cache
@@ -309,7 +322,7 @@ def _steep_gradient(se_angular, otf_radial=None):
                                      otf_radial=otf_radial))(STEEP_C)
 
 
-def test_gradient_takes_the_count_by_itself_with_concrete_spectra():
+def test_gradient_takes_the_count_by_itself_with_concrete_spectra(small_radial_table):
     """With ``u`` and the spectra concrete, the peaks without the tiers take
     ``otf_radial_for``'s count (session 88), and differentiated ``se_angular_for``'s for
     the gradient alone: the gradient is the grid's with 1920 angular fine nodes and those
@@ -318,6 +331,7 @@ def test_gradient_takes_the_count_by_itself_with_concrete_spectra():
     ``CHECKED_SNR`` neither, and the ``grad_`` counts given are taken with traced spectra
     too (``_low_noise_statics``; the program is the same)."""
     assert jj.se_angular_for(STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(STEEP_NOISE)) == 1920
+    assert jj.otf_radial_for(STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(STEEP_NOISE)) == STEEP_RADIAL
     assert STEEP_RADIAL > PRESETS["fast"]["nodes"][0]
     own, fine = _steep_gradient(48), _steep_gradient(1920, STEEP_RADIAL)
     assert _relative(own, fine) > 1e-2  # the preset's own count does not hold it
@@ -362,7 +376,7 @@ def test_gradient_takes_the_count_by_itself_with_concrete_spectra():
     assert traced(angular=32, radial=16) == ((None, None), None, False)
 
 
-def test_traced_spectra_warn_at_run_time():
+def test_traced_spectra_warn_at_run_time(small_radial_table):
     """With the noise traced (an argument of the caller's ``jit``, differentiated, here
     under ``vmap``) the counts cannot be chosen: each gradient checks the peak ratio when
     it runs and warns beyond ``CHECKED_SNR``, naming the counts; inside it, silence. The
@@ -384,7 +398,7 @@ def test_traced_spectra_warn_at_run_time():
         float(_steep(STEEP_C, STEEP_NOISE, otf_radial=24)), rel=1e-13)
 
 
-def test_lens_merit_passes_the_count_on(monkeypatch):
+def test_lens_merit_passes_the_count_on(monkeypatch, small_radial_table):
     """``lens_merit`` traces ``u`` and the spectra inside (the band follows ``lambda N``),
     so it chooses the counts from its concrete arguments and gives them to ``jmse`` as
     ``grad_se_angular`` and ``otf_radial`` (what ``jmse`` does with them is the tests'
