@@ -1973,7 +1973,7 @@ def jmse(
         the four counts are given. With them traced (a noise level swept under ``vmap``,
         or an argument of your ``jit``) the value is its own grid's, and a gradient warns
         at run time (``grad_se_angular``). Time: at the Fig. 1 point 160 radial OTF
-        nodes add about 50 ms to ``"high"``'s 72 ms value, and 65 ms to its 224 ms
+        nodes add about 50 ms to ``"high"``'s 82 ms value, and 64 ms to its 234 ms
         ``value_and_grad`` with 1920 angular fine nodes (docs/accuracy.md).
     grad_otf_radial : int or None
         ``otf_radial`` for derivatives alone, as ``grad_se_angular`` is. Giving any of
