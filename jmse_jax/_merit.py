@@ -712,12 +712,16 @@ def _check_one_design(aberrations, field, u):
                   "for many designs use jmse_jax.sweep_jmse or jax.vmap")
 
 
-def _validate(aberrations, field, u, signal, noise):
-    _validate_geometry(aberrations, field, u)
+def _check_spectrum_types(signal, noise):
     if not isinstance(signal, AbstractSignal):
         raise TypeError(f"signal must be a jmse_jax signal model, got {type(signal)}")
     if not isinstance(noise, AbstractNoise):
         raise TypeError(f"noise must be a jmse_jax noise model, got {type(noise)}")
+
+
+def _validate(aberrations, field, u, signal, noise):
+    _validate_geometry(aberrations, field, u)
+    _check_spectrum_types(signal, noise)
     for name, spectrum in (("signal", signal), ("noise", noise)):
         for path, leaf in jax.tree_util.tree_flatten_with_path(spectrum)[0]:
             if np.ndim(leaf) != 0:
@@ -2516,10 +2520,7 @@ def _gradient_counts(u, signal, noise):
 
 def _check_spectra(u, signal, noise):
     check_range("u", u, 0.0, U_MAX, low_inclusive=False)
-    if not isinstance(signal, AbstractSignal):
-        raise TypeError(f"signal must be a jmse_jax signal model, got {type(signal)}")
-    if not isinstance(noise, AbstractNoise):
-        raise TypeError(f"noise must be a jmse_jax noise model, got {type(noise)}")
+    _check_spectrum_types(signal, noise)
 
 
 def se_angular_for(u, signal, noise) -> int:
