@@ -2120,46 +2120,54 @@ def _low_noise_statics(static, spectra, given, auto):
     both, ``se_angular`` for the gradient), otherwise the ``grad_`` counts given raise the
     gradient's (the others are in ``static`` already, ``_base_plans``)."""
     auto = auto and all(n is None for n in given.values())
-    counts, watch = _auto_counts(static, spectra) if auto else (None, False)
+    counts, watch = (_auto_counts(*static.value[:2], spectra) if auto else (None, False))
     # The radial OTF nodes hold the value as well as the gradient (OTF_RADIAL_BY_SNR).
-    static = _raised(static, {k: counts[k] for k in _VALUE_FLOORS} if counts else {}) or static
+    static = _raised(static, {k: n for k, n in (counts or {}).items()
+                              if k in _VALUE_FLOORS}) or static
     grads = counts if auto else {k: given["grad_" + k] for k, _, _ in _FLOORS}
     return static, _raised(static, grads or {}), watch
 
 
-def _auto_counts(static, spectra):
-    """``(counts, watch)``: the counts ``jmse`` takes by itself (``_counts_for_snr``:
-    ``se_angular`` for the gradient, ``otf_radial`` for the value and the gradient) for a
-    call with a preset's grids and none of the counts given. Only where ``static`` holds
-    the peaks without the default's tiers (``"high"``, whose own counts hold its gradients
-    only to ``CHECKED_SNR``) and ``spectra``, the arguments ``(u, signal, noise)`` as
-    given, are concrete at a peak ``S_x / S_n`` beyond ``CHECKED_SNR``; None otherwise.
+def _auto_counts(options, tiers, spectra):
+    """``(counts, watch)``: the counts ``jmse`` takes by itself for a call with a preset's
+    grids and none of the counts given, as the ``{floor: count}`` of ``options``'s
+    (resolved ``jmse`` options; ``tiers`` theirs) that ``_counts_for_snr`` raises
+    (``otf_radial`` for the value and the gradient, ``se_angular`` for the gradient).
+    Only where ``options`` hold the peaks without the default's tiers (``"high"``, whose
+    own counts hold its gradients only to ``CHECKED_SNR``) and ``spectra``, the arguments
+    ``(u, signal, noise)`` as given, are concrete: ``{}`` there at a peak ``S_x / S_n``
+    within ``CHECKED_SNR`` (the own counts hold), None where the choice does not apply.
     ``watch``: the same case with ``spectra`` traced, where the counts cannot be chosen
     (grid sizes are static); a gradient then warns at run time beyond ``CHECKED_SNR``
-    (``_warn_traced_gradient_snr``)."""
-    options, tiers = static.value[0], static.value[1]
+    (``_warn_traced_gradient_snr``). ``jmse``, ``lens_merit`` and ``optimise`` use it."""
     if options["se_nodes"] is None or not _snr_peaks(options["peaks"], tiers):
         return None, False  # no fine polar grid, or the default's tiers
     if not is_concrete(spectra):
         return None, True
     # Concrete even inside a caller's jit, where the call would be staged out.
     with jax.ensure_compile_time_eval():
-        return _gradient_counts(*spectra), False
+        snr = float(_peak_snr(*spectra))
+    return (_above_own(options, _counts_for_snr(snr)) if snr > CHECKED_SNR else {}), False
 
 
 def _raised(static, counts):
     """``static`` with its floors (``_FLOORS``) raised to ``counts`` (``{floor: count or
-    None}``), or None when that raises no count of its own grid (``_own_counts``; the
-    branches of ``"high"`` have as many or more). With the default's tiers, which refuse
-    the floors, or without a fine polar grid: None."""
+    None}``), or None when that raises no count of its own grid (``_above_own``). With the
+    default's tiers, which refuse the floors, or without a fine polar grid: None."""
     options, tiers = static.value[0], static.value[1]
     if options["se_nodes"] is None or tiers is not None:
         return None
-    own = _own_counts(options)
-    raised = {k: n for k, n in counts.items() if n is not None and n > own[k]}
+    raised = _above_own(options, counts)
     if not raised:
         return None
     return _Static(({**options, **raised},) + tuple(static.value[1:]))
+
+
+def _above_own(options, counts):
+    """The counts of ``counts`` (``{floor: count or None}``) above those of ``options``'s
+    own grid (``_own_counts``; the branches of ``"high"`` have as many or more)."""
+    own = _own_counts(options)
+    return {k: n for k, n in counts.items() if n is not None and n > own[k]}
 
 
 def _own_counts(options):
@@ -2508,14 +2516,6 @@ def _counts_for_snr(snr) -> dict:
     ``snr``: ``SE_ANGULAR_BY_SNR``'s and ``OTF_RADIAL_BY_SNR``'s."""
     return dict(se_angular=_se_angular_for_snr(snr),
                 otf_radial=_table_count(OTF_RADIAL_BY_SNR, snr))
-
-
-def _gradient_counts(u, signal, noise):
-    """``_counts_for_snr`` at the peak ``S_x / S_n`` of these concrete spectra where it is
-    beyond ``CHECKED_SNR``; None within it, where the grids' own counts hold the gradient
-    (``_auto_counts``, ``lens_merit`` and ``optimise``)."""
-    snr = float(_peak_snr(u, signal, noise))
-    return _counts_for_snr(snr) if snr > CHECKED_SNR else None
 
 
 def _check_spectra(u, signal, noise):

@@ -26,7 +26,7 @@ from ._merit import (
     _FLOOR_OPTIONS,
     _GRID_OPTIONS,
     _VALUE_FLOORS,
-    _gradient_counts,
+    _auto_counts,
     _own_counts,
     _snr_peaks,
     _warn_beyond_checked_snr,
@@ -170,13 +170,13 @@ def lens_merit(
 
 
 def _with_gradient_counts(jmse_options, u, signal, noise, prefix=""):
-    """``jmse_options`` with the counts of ``_gradient_counts`` (``otf_radial``, which
+    """``jmse_options`` with the counts of ``_auto_counts`` (``otf_radial``, which
     holds values too, and ``se_angular`` named with ``prefix``: ``""`` for ``optimise``,
     whose every value comes with a gradient; ``"grad_"`` for ``lens_merit``, whose value
     keeps the preset's angular count, as ``jmse``'s own choice does) where they are more
-    than the preset's own grid has: ``"high"`` (the
-    peaks without the default's tiers) at a concrete peak ``S_x / S_n`` beyond
-    ``CHECKED_SNR``, with none of these counts nor grid options given; within it,
+    than the preset's own grid has: ``"high"`` (the peaks without the default's tiers) at
+    a concrete peak ``S_x / S_n`` beyond ``CHECKED_SNR``, with none of these counts nor
+    grid options given; within it,
     ``grad_se_angular`` at the grid's own count (checked: no run-time check then).
     Anything else (bad arguments included, which the checks then refuse) is returned as
     it is."""
@@ -187,22 +187,20 @@ def _with_gradient_counts(jmse_options, u, signal, noise, prefix=""):
         return jmse_options
     try:
         options = _full_jmse_options(**jmse_options)
-        counts = _gradient_counts(u, signal, noise)
+        counts, _ = _auto_counts(options, options["tiers"], (u, signal, noise))
     except (TypeError, ValueError):
         return jmse_options  # refused with its own message by the checks that follow
-    if not _snr_peaks(options["peaks"], options["tiers"]) or options["se_nodes"] is None:
-        return jmse_options
-    own = _own_counts(options)
-    # The radial OTF nodes hold the value too (jmse takes them for both by itself).
-    raised = {("" if k in _VALUE_FLOORS else prefix) + k: n
-              for k, n in (counts or {}).items() if n > own[k]}
-    if raised:
-        return {**jmse_options, **raised}
+    if counts is None:
+        return jmse_options  # not "high"-like: the choice does not apply
+    if counts:
+        # The radial OTF nodes hold the value too (jmse takes them for both by itself).
+        return {**jmse_options, **{("" if k in _VALUE_FLOORS else prefix) + k: n
+                                   for k, n in counts.items()}}
     # Within CHECKED_SNR the grid's own counts hold the gradient (se_angular_for gives
     # "high"'s 960 there, more than the 48 of "fast" with peaks=True, which holds it as it
     # is). Saying so spares the gradients a run-time check of the ratio: inside
     # _lens_merit_jit jmse sees u and the spectra traced (_merit._auto_counts's watch).
-    return {**jmse_options, "grad_se_angular": own["se_angular"]}
+    return {**jmse_options, "grad_se_angular": _own_counts(options)["se_angular"]}
 
 
 def _check_merit_arguments(dtype, u, signal, noise, fields, field_weights, wavelengths,
