@@ -19,10 +19,13 @@ Usage (from the repository root; about 45 min on 2 cores)::
     .venv/bin/python benchmarks/otf_radial.py [--reference 256]
     .venv/bin/python benchmarks/otf_radial.py --timing
     .venv/bin/python benchmarks/otf_radial.py --recheck   # about 5 min
+    .venv/bin/python benchmarks/otf_radial.py --sweep     # about 5 min
 
 Writes ``results/otf_radial.json`` and ``.md`` (``--timing``: ``otf_radial_timing``,
 ``"high"``'s cost with the counts at the Fig. 1 point; ``--recheck``: ``otf_radial_recheck``,
-session 87's climbs' worst designs run again with the counts).
+session 87's climbs' worst designs run again with the counts; ``--sweep``:
+``otf_radial_sweep``, ``sweep_jmse(..., preset="high")``'s values at low noise, which choose
+the counts from the sweep's ``u`` since session 89, against the own grid's).
 """
 
 from __future__ import annotations
@@ -176,6 +179,48 @@ def recheck(reference, names=CLIMBS):
     return rows
 
 
+#: ``"high"``'s base radial OTF count: given, it raises nothing and turns the choice off.
+PRESETS_HIGH_RADIAL = jj.PRESETS["high"]["nodes"][0]
+
+
+def sweep_values(reference, ratios=(2e7, 2e8), names=("seed3", "seed4")):
+    """``sweep_jmse(..., preset="high")``'s value of each design of ``names`` at the peak
+    ratios ``ratios``: with the counts it now chooses from its concrete ``u``, with
+    ``otf_radial=80`` given (``"high"``'s base count, which raises nothing and turns the
+    choice off: what a sweep computed before session 89, with ``u`` traced), and the eager
+    ``jmse``'s, each against the reference value (``REFERENCE`` with ``reference`` radial
+    OTF nodes)."""
+    import warnings
+
+    import numpy as np
+
+    ref_grid = dict(REFERENCE, nodes=(reference, REFERENCE["nodes"][1]))
+    rows = []
+    for name in names:
+        for ratio in ratios:
+            design = dc._design(sa._with_ratio(DESIGNS[name], ratio))
+            aberrations, field, u, signal, noise = design
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # beyond CHECKED_SNR, as measured here
+                now, before = (float(jj.sweep_jmse(
+                    aberrations, field, np.array([u]), signal, noise, preset="high",
+                    progress=False, **options).value[0])
+                    for options in ({}, dict(otf_radial=PRESETS_HIGH_RADIAL)))
+                eager = float(jj.jmse(aberrations, field, u, signal, noise, preset="high"))
+                value_ref = float(jj.jmse(aberrations, field, u, signal, noise, **ref_grid))
+            rows.append(dict(design=name, ratio=ratio, otf_radial=jj.otf_radial_for(
+                u, signal, noise), sweep_error=abs(now / value_ref - 1.0),
+                own_error=abs(before / value_ref - 1.0),
+                eager_error=abs(eager / value_ref - 1.0), sweep_vs_eager=abs(now / eager - 1.0)))
+            print(rows[-1], flush=True)
+            jax.clear_caches()
+    return rows
+
+
+def ref_grid_text(reference):
+    return str(dict(REFERENCE, nodes=(reference, REFERENCE["nodes"][1])))
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--reference", type=int, default=256,
@@ -185,8 +230,30 @@ def main(argv=None):
     parser.add_argument("--recheck", action="store_true",
                         help="run session 87's climbs' worst designs again with the counts "
                              "(results/otf_radial_recheck)")
+    parser.add_argument("--sweep", action="store_true",
+                        help="sweep_jmse's values of 'high' at low noise against the own "
+                             "grid's (results/otf_radial_sweep)")
     args = parser.parse_args(argv)
     machine = common.machine_info()
+    if args.sweep:
+        rows = sweep_values(args.reference)
+        lines = ["# `sweep_jmse(..., preset=\"high\")` at low noise, with the counts", "",
+                 f"`python benchmarks/otf_radial.py --sweep --reference {args.reference}`",
+                 "", common.machine_line(machine, common.load_average()), "",
+                 "Relative errors of the value against "
+                 f"{ref_grid_text(args.reference)}: the sweep's (which chooses the counts "
+                 "from its concrete `u` since session 89), the sweep's with `otf_radial=80` "
+                 "given (the own grid's: what a sweep gave before, with `u` traced), and "
+                 "the eager `jmse`'s.", "",
+                 "| design | peak S_x/S_n | otf_radial_for | sweep | sweep before (own grid) "
+                 "| eager jmse | sweep vs eager |", "|---|---|---|---|---|---|---|"]
+        for r in rows:
+            lines.append(f"| {r['design']} | {r['ratio']:.3g} | {r['otf_radial']} | "
+                         f"{r['sweep_error']:.1e} | {r['own_error']:.1e} | "
+                         f"{r['eager_error']:.1e} | {r['sweep_vs_eager']:.1e} |")
+        print("\n".join(lines))
+        common.write_report("otf_radial_sweep", dict(machine=machine, rows=rows), lines)
+        return
     if args.recheck:
         rows = recheck(args.reference)
         lines = ["# Session 87's worst low-noise designs of `high`, with the counts", "",

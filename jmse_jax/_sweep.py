@@ -31,7 +31,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._aberrations import Seidel
-from ._merit import U_MAX, jmse, jmse_options
+from ._merit import U_MAX, _peak_snr, _snr_peaks, jmse, jmse_options
 from ._numerics import all_finite, check_count
 
 __all__ = ["SweepResult", "SweepStatus", "hypercube", "sweep", "sweep_jmse"]
@@ -771,6 +771,38 @@ def hypercube(**axes) -> dict[str, np.ndarray]:
     return {name: grid.reshape(-1) for name, grid in zip(arrays, grids, strict=True)}
 
 
+def _with_sweep_counts(preset, options, u, signal, noise):
+    """``options`` with the counts ``"high"`` takes by itself at low noise (``jmse``'s
+    ``otf_radial`` and ``grad_se_angular``: ``_optimise._with_gradient_counts``, as
+    ``lens_merit`` passes them), chosen here from the sweep's concrete ``u``: inside the
+    sweep ``u`` is one of the batched inputs, traced, so ``jmse`` could not choose them
+    and would take its own grid's (a value up to 6.2e-5 off past ``CHECKED_SNR``, and a
+    gradient that warns at run time). The counts are those of the in-range ``u`` with the
+    largest peak ``S_x / S_n``, so every design gets at least the counts it needs.
+    Anything else (a traced ``u``, no ``u`` in range, options without the choice) is
+    returned as it is; bad arguments are then refused by ``jmse``'s own checks."""
+    from ._optimise import _with_gradient_counts  # _optimise imports the merit, not this
+
+    try:
+        given = jmse_options(preset, **options)
+        values = np.unique(np.asarray(u, float).reshape(-1))
+    except (TypeError, ValueError, jax.errors.ConcretizationTypeError):
+        return options
+    if given["se_nodes"] is None or not _snr_peaks(given["peaks"], given["tiers"]):
+        return options  # not "high"-like: nothing to choose (spares the ratio's program)
+    values = values[np.isfinite(values) & (values > 0.0) & (values <= U_MAX)]
+    if values.size == 0:
+        return options
+    try:
+        snr = np.asarray(jax.vmap(_peak_snr, (0, None, None))(values, signal, noise))
+    except (TypeError, ValueError):
+        return options  # spectra jmse refuses, with its own message
+    worst = values[int(np.argmax(np.where(np.isfinite(snr), snr, -np.inf)))]
+    chosen = _with_gradient_counts({"preset": preset, **options}, worst, signal, noise,
+                                   prefix="grad_")
+    return {key: value for key, value in chosen.items() if key != "preset"}
+
+
 def sweep_jmse(
     aberrations,
     field,
@@ -800,7 +832,12 @@ def sweep_jmse(
     grad : bool
         Also return the gradient with respect to the aberrations, ``field`` and ``u``.
     preset, **options
-        ``jmse`` options, checked before anything is compiled.
+        ``jmse`` options, checked before anything is compiled. For ``preset="high"`` with
+        none of the counts (``se_angular``, ``otf_radial``, their ``grad_`` twins) nor grid
+        options given, the sweep takes the counts an eager ``jmse`` call takes by itself
+        at low noise (``otf_radial_for``; ``se_angular_for`` for the gradient) for the
+        in-range ``u`` with the largest peak ``S_x / S_n``, so every design gets at least
+        the counts it needs (inside the sweep ``u`` is traced and ``jmse`` could not).
     batch_size, chunks_per_call, devices, workers, progress, metadata
         As in ``sweep``.
 
@@ -839,6 +876,7 @@ def sweep_jmse(
                              f"got shape {np.shape(value)}")
     field = np.asarray(field, float) if isinstance(field, (list, tuple)) else field
     u = np.asarray(u, float) if isinstance(u, (list, tuple)) else u
+    options = _with_sweep_counts(preset, options, u, signal, noise)
 
     def in_range(design):
         f, v = design["field"], design["u"]

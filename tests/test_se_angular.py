@@ -426,3 +426,51 @@ def test_lens_merit_passes_the_count_on(monkeypatch, small_radial_table):
                             and o.get("otf_radial") == radial for o in seen), seen
     given = dict(PEAKED_FAST, grad_se_angular=960)  # the caller's: kept, by optimise too
     assert _with_gradient_counts(given, STEEP_U, STEEP_SIGNAL, noise) == given
+
+
+def test_sweep_jmse_passes_the_counts_on(monkeypatch, small_radial_table):
+    """Inside ``sweep_jmse`` ``u`` is a batched input, traced, so the sweep chooses the
+    counts from its concrete ``u`` (the in-range one with the largest peak ratio) and gives
+    them to ``jmse`` as ``lens_merit`` does: ``otf_radial`` and ``grad_se_angular`` past
+    ``CHECKED_SNR``, the grid's own angular count within it; nothing for the default's
+    tiers or with a count or grid option given."""
+    import jmse_jax._sweep as sweep_module
+
+    seen = []
+
+    def spy(aberrations, field, u, signal, noise, **options):
+        seen.append(options)
+        return u * aberrations.w020  # the plumbing only: no grid compiled
+
+    monkeypatch.setattr(sweep_module, "jmse", spy)
+
+    def passed(u, noise, preset="fast", **options):
+        seen.clear()
+        jj.sweep_jmse(jj.Seidel(w020=np.ones(3)), 0.5, u, STEEP_SIGNAL, jj.WhiteNoise(noise),
+                      grad=True, preset=preset, progress=False, **options)
+        assert seen and all(o == seen[0] for o in seen)
+        return {k: v for k, v in seen[0].items() if k not in ("preset", "peaks")}
+
+    # An out-of-range and a non-finite u (INVALID, NONFINITE_INPUT) do not take part.
+    u = np.array([STEEP_U, 2.0, np.nan])
+    assert passed(u, STEEP_NOISE, peaks=True) == dict(grad_se_angular=1920,
+                                                      otf_radial=STEEP_RADIAL)
+    assert passed(u, 100 * STEEP_NOISE, peaks=True) == dict(grad_se_angular=48)
+    # "high"'s own 80 radial OTF nodes are more than the small table's count.
+    assert passed(STEEP_U, STEEP_NOISE, preset="high") == dict(grad_se_angular=1920)
+    assert passed(STEEP_U, STEEP_NOISE, preset="default") == {}
+    assert passed(STEEP_U, STEEP_NOISE, peaks=True, otf_radial=40) == dict(otf_radial=40)
+    assert passed(STEEP_U, STEEP_NOISE, peaks=True, nodes=(24, 8)) == dict(nodes=(24, 8))
+    assert passed(np.array([np.nan, 3.0, 0.0]), STEEP_NOISE, peaks=True) == {}
+
+
+def test_sweep_jmse_of_the_steep_design_is_the_eager_call(small_radial_table):
+    """The sweep's value at a peak ratio of 1.5e7 is the eager ``jmse``'s (which takes the
+    radial count by itself), not the own grid's. (The gradient's count is the plumbing
+    above and ``_low_noise_statics``' tests; compiling it here would cost half a minute.)"""
+    result = jj.sweep_jmse(jj.Seidel(*STEEP_C), STEEP_FIELD, np.array([STEEP_U]),
+                           STEEP_SIGNAL, jj.WhiteNoise(STEEP_NOISE), progress=False,
+                           **PEAKED_FAST)
+    eager = float(_steep(STEEP_C, STEEP_NOISE))
+    assert eager != float(_steep(STEEP_C, STEEP_NOISE, otf_radial=24))  # the own grid's
+    assert float(result.value[0]) == pytest.approx(eager, rel=1e-12)
