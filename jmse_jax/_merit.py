@@ -37,6 +37,8 @@ from ._quadrature import (
     FINE_SUB_PANEL,
     OUTER_NODES,
     QUADRATURES,
+    AngularTables,
+    angular_interpolation_block,
     angular_rule,
     angular_split,
     fine_sub_panels,
@@ -900,7 +902,14 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(
     # The angular rules may be split at arccos(u) (``angular_split``): the coarse rule's
     # template row picks the fine rule's row and the block-diagonal interpolation matrix.
     split = angular_split(u, coarse[1], dtype)
-    l_a = jnp.asarray(l_a_rows, dtype)[split[0]]
+    # Above BUILT_ANGULAR_BYTES the matrices are built block by block from host tables.
+    built = isinstance(l_a_rows, AngularTables)
+    if built:
+        coarse_row = tuple(jnp.asarray(a)[split[0]].astype(dtype)
+                           for a in l_a_rows[:3])
+        l_a = jnp.stack([jnp.asarray(a)[split[0]].astype(dtype) for a in l_a_rows[3:]], -1)
+    else:
+        l_a = jnp.asarray(l_a_rows, dtype)[split[0]]
     frac, w_frac = angular_rule(u, coarse[1], dtype, split=split, fine=n_a)
     # Separable interpolation, radial axis first (the cheaper order). Every product is real
     # (real and imaginary parts stacked on a leading axis) with its matrix stored in the
@@ -924,11 +933,12 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(
     # carry zero weight and zero interpolation rows, so they add exact zeros.
     n_blocks, size = _fine_blocks(n_r, n_a)
     pad = n_blocks * size - n_a
-    l_a = jnp.concatenate([l_a, jnp.zeros((pad, l_a.shape[1]), dtype)]).reshape(n_blocks,
-                                                                                size, -1)
+    # Padded rows get zero rows (built: a part that is neither, -1).
+    l_a = jnp.concatenate([l_a, jnp.full((pad, l_a.shape[1]), -1.0 if built else 0.0,
+                                         dtype)]).reshape(n_blocks, size, -1)
     rows = (
         l_a,
-        jnp.swapaxes(l_a, 1, 2),
+        l_a if built else jnp.swapaxes(l_a, 1, 2),
         jnp.concatenate([frac, jnp.full(pad, 0.5, dtype)]).reshape(n_blocks, size),
         jnp.concatenate([w_frac, jnp.zeros(pad, dtype)]).reshape(n_blocks, size),
     )
@@ -936,6 +946,9 @@ def _fine_total(h_coarse, u, signal, noise, coarse, fine, dtype, adjoint, drop=(
     def block(carry, rows):
         total, back = carry
         rows_l, rows_l_t, frac, w_frac = rows
+        if built:
+            rows_l = angular_interpolation_block(coarse_row, rows_l[:, 0], rows_l[:, 1])
+            rows_l_t = rows_l.T
         part = _fine_parts(h, rows_l, rows_l_t, u, signal, noise, n_r, n_a, (frac, w_frac),
                            dtype, adjoint, ridges)
         if adjoint:

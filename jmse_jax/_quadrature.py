@@ -261,6 +261,64 @@ def split_interpolation(coarse: int, fine: int) -> np.ndarray:
     return out
 
 
+#: Above this many bytes the angular interpolation matrices of ``split_interpolation`` (one
+#: dense ``fine x coarse`` matrix per template row, picked by the traced ``u``) are not made
+#: constants of the program: ``polar_interpolation_matrices`` gives the tables of
+#: ``angular_interpolation_tables`` instead and ``angular_interpolation_block`` builds the
+#: rows of a block in the program. The presets' grids stay below it (``"high"``'s Zernike
+#: grids with 5760 angular fine nodes: 168 MB), so their programs are unchanged; a Zernike
+#: reference with 7680 (``benchmarks/default_climb.py``) had 0.96 GB of them, which a
+#: ``value_and_grad`` captured four times and which exhausted a 24 GB host (session 87).
+BUILT_ANGULAR_BYTES = 256 * 2**20
+
+
+class AngularTables(NamedTuple):
+    """Host tables from which ``angular_interpolation_block`` builds the angular
+    interpolation matrix of a template row (``split_interpolation``'s, to rounding): the
+    coarse rule's positions on [0, 1] within their part, parts and barycentric weights
+    (``(rows, coarse)``), and the fine rule's positions and parts (``(rows, fine)``)."""
+
+    coarse_local: np.ndarray
+    coarse_second: np.ndarray
+    coarse_bary: np.ndarray
+    fine_local: np.ndarray
+    fine_second: np.ndarray
+
+
+@functools.cache
+def angular_interpolation_tables(coarse: int, fine: int) -> AngularTables:
+    """``AngularTables`` of the angular rules of ``coarse`` and ``fine`` nodes."""
+    c_local, _, c_second = angular_templates(coarse)
+    f_local, _, f_second = angular_templates(coarse, fine)
+    bary = np.zeros(c_local.shape)
+    for row in range(len(c_local)):
+        for part in (False, True):
+            ci = np.flatnonzero(c_second[row] == part)
+            if not len(ci):
+                continue  # the plain rule (row 0) has no second part
+            diff = c_local[row][ci, None] - c_local[row][None, ci]
+            np.fill_diagonal(diff, 1.0)
+            weights = 1.0 / np.prod(diff, axis=1)
+            # A common factor cancels; scaled to at most 1 (float32 would overflow).
+            bary[row, ci] = weights / np.max(np.abs(weights))
+    return AngularTables(c_local, c_second, bary, f_local, f_second)
+
+
+def angular_interpolation_block(coarse_row, fine_local, fine_part):
+    """The rows of ``split_interpolation``'s matrix for fine nodes at ``fine_local`` (``(m,)``)
+    in parts ``fine_part`` (0 or 1; any other value gives a zero row, for padding), from the
+    coarse rule's ``coarse_row = (local, second, bary)`` of one template row (traced): the
+    barycentric formula of ``_numerics.barycentric_matrix`` within each part."""
+    c_local, c_second, c_bary = coarse_row
+    same = fine_part[:, None] == c_second.astype(fine_part.dtype)[None, :]
+    delta = fine_local[:, None] - c_local[None, :]
+    exact = same & (jnp.abs(delta) <= 1e-15)
+    terms = jnp.where(same, c_bary[None, :] / jnp.where(exact, 1.0, delta), 0.0)
+    total = jnp.sum(terms, axis=1, keepdims=True)
+    matrix = terms / jnp.where(total == 0.0, 1.0, total)
+    return jnp.where(jnp.any(exact, axis=1, keepdims=True), exact.astype(matrix.dtype), matrix)
+
+
 class PolarPanels(NamedTuple):
     """Nodes of the polar panel rule, shaped ``(2 triangles, n_angles, n_radial)``.
 
@@ -339,7 +397,8 @@ def polar_interpolation_matrices(coarse: tuple[int, int], fine: tuple[int, int],
     ``(n_radial, n_angular)`` Gauss nodes to ``fine`` ones (polynomial interpolation in ``t``
     and in the angle fraction, each on [0, 1]). ``L_angular`` is ``(rows, fine, coarse)``, one
     matrix per template row of the (split) angular rule (``split_interpolation``; row 0: the
-    plain Gauss rules).
+    plain Gauss rules), or, above ``BUILT_ANGULAR_BYTES`` (and without ``drop``'s angular
+    part), the ``AngularTables`` the program builds it from.
 
     ``sub_panel``: the fine radial rule's sub-panels (``_radial_rule``).
 
@@ -350,6 +409,9 @@ def polar_interpolation_matrices(coarse: tuple[int, int], fine: tuple[int, int],
     estimate of ``TierShortcut.first``).
     """
     l_r = _radial_interpolation(coarse[0], fine[0], sub_panel)
+    rows = len(angular_templates(coarse[1])[0])
+    if not drop[1] and rows * fine[1] * coarse[1] * 8 > BUILT_ANGULAR_BYTES:
+        return l_r, angular_interpolation_tables(coarse[1], fine[1])
     l_a = split_interpolation(coarse[1], fine[1])
     if drop[0]:
         l_r = l_r @ _radial_lowering(coarse[0], drop[0])

@@ -203,3 +203,72 @@ def test_lowered_interpolation_drops_the_top_legendre_degrees(coarse, fine, drop
         values = legendre.legval(2 * x - 1, np.eye(k)[degree])
         expected = full_a[0] @ values if kept else np.zeros(fine[1])
         np.testing.assert_allclose(low_a[0] @ values, expected, atol=1e-9)
+
+
+@pytest.mark.parametrize("coarse, fine", [(40, 960), (64, 1000), (16, 48)])
+def test_built_angular_interpolation_is_the_host_matrices(coarse, fine):
+    """``angular_interpolation_block`` (the program's build of the angular interpolation
+    above ``BUILT_ANGULAR_BYTES``) gives ``split_interpolation``'s matrix of every template
+    row to rounding, zero rows for padding (part -1), and within each part interpolates a
+    polynomial of the part's degree exactly (oracle: the polynomial at the fine nodes)."""
+    from jmse_jax._quadrature import (
+        angular_interpolation_block,
+        angular_interpolation_tables,
+        split_interpolation,
+    )
+
+    tables = angular_interpolation_tables(coarse, fine)
+    host = split_interpolation(coarse, fine)
+    for row in range(len(tables.coarse_local)):
+        coarse_row = tuple(jnp.asarray(a[row], float) for a in tables[:3])
+        part = np.asarray(tables.fine_second[row], float)
+        built = np.asarray(angular_interpolation_block(
+            coarse_row, jnp.asarray(np.append(tables.fine_local[row], 0.5)),
+            jnp.asarray(np.append(part, -1.0))))
+        np.testing.assert_allclose(built[:-1], host[row], rtol=0, atol=1e-13)
+        assert not built[-1].any()
+        second = tables.coarse_second[row]
+        for side in (False, True):
+            k = int(np.sum(second == side))
+            if k == 0:
+                continue
+            values = np.where(second == side, (tables.coarse_local[row] - 0.3) ** (k - 1), 0.0)
+            chosen = tables.fine_second[row] == side
+            np.testing.assert_allclose(
+                (built[:-1] @ values)[chosen], (tables.fine_local[row][chosen] - 0.3) ** (k - 1),
+                rtol=0, atol=1e-11)
+
+
+def test_jmse_with_built_angular_interpolation(monkeypatch):
+    """With every grid's angular interpolation built in the program
+    (``BUILT_ANGULAR_BYTES = 0``), ``jmse``'s value and gradient in the coefficients (the
+    fine stage's adjoint) and in ``u`` (its ordinary derivative) are those with the host
+    matrices, on a split angular rule (u = 0.85)."""
+    import jmse_jax as jj
+    from jmse_jax import _merit, _quadrature
+
+    c = jnp.array([1.5, -0.8, 0.7, 0.5, -0.3])
+    calls = []
+
+    def counted(*args):
+        calls.append(1)
+        return _quadrature.angular_interpolation_block(*args)
+
+    monkeypatch.setattr(_merit, "angular_interpolation_block", counted)
+
+    def merit(c, u):
+        return jj.jmse(jj.Seidel(*c), 0.7, u, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4),
+                       preset="fast")
+
+    def run():
+        jax.clear_caches()
+        value, (g_c, g_u) = jax.value_and_grad(merit, argnums=(0, 1))(c, 0.85)
+        return float(value), np.append(np.asarray(g_c), float(g_u))
+
+    value, grad = run()
+    assert not calls
+    monkeypatch.setattr(_quadrature, "BUILT_ANGULAR_BYTES", 0)
+    built_value, built_grad = run()
+    assert calls  # the build was traced
+    assert built_value == pytest.approx(value, rel=1e-13)
+    np.testing.assert_allclose(built_grad, grad, rtol=0, atol=1e-12 * np.max(np.abs(grad)))
