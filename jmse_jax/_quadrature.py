@@ -265,11 +265,12 @@ def split_interpolation(coarse: int, fine: int) -> np.ndarray:
 #: dense ``fine x coarse`` matrix per template row, picked by the traced ``u``) are not made
 #: constants of the program: ``polar_interpolation_matrices`` gives the tables of
 #: ``angular_interpolation_tables`` instead and ``angular_interpolation_block`` builds the
-#: rows of a block in the program. The presets' grids stay below it (``"high"``'s Zernike
-#: grids with 5760 angular fine nodes: 168 MB), so their programs are unchanged; a Zernike
-#: reference with 7680 (``benchmarks/default_climb.py``) had 0.96 GB of them, which a
+#: rows of a block in the program. Every grid of the presets stays below it, with
+#: ``se_angular_for``'s largest count too (the Zernike balanced grid's 96 coarse angular
+#: nodes with 5760 fine ones: 380 MB), so their programs are unchanged; a Zernike reference
+#: with 7680 (``benchmarks/default_climb.py``) had 0.92 GB of them, which a
 #: ``value_and_grad`` captured four times and which exhausted a 24 GB host (session 87).
-BUILT_ANGULAR_BYTES = 256 * 2**20
+BUILT_ANGULAR_BYTES = 512 * 2**20
 
 
 class AngularTables(NamedTuple):
