@@ -221,6 +221,12 @@ def ref_grid_text(reference):
     return str(dict(REFERENCE, nodes=(reference, REFERENCE["nodes"][1])))
 
 
+def _heading(title, command, machine):
+    """A report's first lines: its title, the command that made it and the machine."""
+    return [f"# {title}", "", f"`python benchmarks/otf_radial.py{command}`", "",
+            common.machine_line(machine, common.load_average()), ""]
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--reference", type=int, default=256,
@@ -237,9 +243,8 @@ def main(argv=None):
     machine = common.machine_info()
     if args.sweep:
         rows = sweep_values(args.reference)
-        lines = ["# `sweep_jmse(..., preset=\"high\")` at low noise, with the counts", "",
-                 f"`python benchmarks/otf_radial.py --sweep --reference {args.reference}`",
-                 "", common.machine_line(machine, common.load_average()), "",
+        lines = _heading("`sweep_jmse(..., preset=\"high\")` at low noise, with the counts",
+                         f" --sweep --reference {args.reference}", machine) + [
                  "Relative errors of the value against "
                  f"{ref_grid_text(args.reference)}: the sweep's (which chooses the counts "
                  "from its concrete `u` since session 89), the sweep's with `otf_radial=80` "
@@ -256,12 +261,11 @@ def main(argv=None):
         return
     if args.recheck:
         rows = recheck(args.reference)
-        lines = ["# Session 87's worst low-noise designs of `high`, with the counts", "",
-                 f"`python benchmarks/otf_radial.py --recheck --reference {args.reference}`",
-                 "", common.machine_line(machine, common.load_average()), "",
+        lines = _heading("Session 87's worst low-noise designs of `high`, with the counts",
+                         f" --recheck --reference {args.reference}", machine) + [
                  "Each climb's worst design at its own noise with `se_angular_for`'s and "
                  "`otf_radial_for`'s counts (what `optimise` gives `high`), against "
-                 f"{dict(REFERENCE, nodes=(args.reference, REFERENCE['nodes'][1]))}; the "
+                 f"{ref_grid_text(args.reference)}; the "
                  "errors the climb found (with `se_angular` alone) beside them; the eager "
                  "value takes the radial count by itself.", "",
                  "| climbs | climb | peak S_x/S_n | strength | u | counts | gradient's error "
@@ -279,9 +283,8 @@ def main(argv=None):
         return
     if args.timing:
         times = timing()
-        lines = ["# `high`'s cost with the low-noise counts (`se_angular`, `otf_radial`)", "",
-                 "`python benchmarks/otf_radial.py --timing`", "",
-                 common.machine_line(machine, common.load_average()), "",
+        lines = _heading("`high`'s cost with the low-noise counts (`se_angular`, `otf_radial`)",
+                         " --timing", machine) + [
                  "Fig. 1 point, `high`, warm and jitted (`_common.time_compiled`: median), "
                  "float64:", "", "| options | call | time | compile |", "|---|---|---|---|"]
         for t in times:
@@ -291,10 +294,9 @@ def main(argv=None):
         common.write_report("otf_radial_timing", dict(machine=machine, timing=times), lines)
         return
     rows = calibrate(args.reference)
-    lines = ["# `high`'s value and gradient at low noise against its radial OTF nodes", "",
-             f"`python benchmarks/otf_radial.py --reference {args.reference}`", "",
-             common.machine_line(machine, common.load_average()), "",
-             f"Reference: {dict(REFERENCE, nodes=(args.reference, REFERENCE['nodes'][1]))}. "
+    lines = _heading("`high`'s value and gradient at low noise against its radial OTF nodes",
+                     f" --reference {args.reference}", machine) + [
+             f"Reference: {ref_grid_text(args.reference)}. "
              "Each design on the grid it takes in `high`, with `se_angular_for`'s angular "
              "count and the radial OTF nodes given.", "",
              "| design (plan, own radial) | peak S_x/S_n | se_angular | radial OTF nodes | "
