@@ -771,6 +771,10 @@ def hypercube(**axes) -> dict[str, np.ndarray]:
     return {name: grid.reshape(-1) for name, grid in zip(arrays, grids, strict=True)}
 
 
+#: Distinct ``u`` per evaluation of the peak ratios in ``_with_sweep_counts``.
+_PEAK_CHUNK = 4096
+
+
 def _with_sweep_counts(preset, options, u, signal, noise):
     """``options`` with the counts ``"high"`` takes by itself at low noise (``jmse``'s
     ``otf_radial`` and ``grad_se_angular``: ``_optimise._with_gradient_counts``, as
@@ -793,8 +797,11 @@ def _with_sweep_counts(preset, options, u, signal, noise):
     values = values[np.isfinite(values) & (values > 0.0) & (values <= U_MAX)]
     if values.size == 0:
         return options
+    ratios = jax.vmap(_peak_snr, (0, None, None))
     try:
-        snr = np.asarray(jax.vmap(_peak_snr, (0, None, None))(values, signal, noise))
+        # In chunks: a sweep may hold a million distinct u, each a 17 x 17 grid here.
+        snr = np.concatenate([np.asarray(ratios(values[i:i + _PEAK_CHUNK], signal, noise))
+                              for i in range(0, values.size, _PEAK_CHUNK)])
     except (TypeError, ValueError):
         return options  # spectra jmse refuses, with its own message
     worst = values[int(np.argmax(np.where(np.isfinite(snr), snr, -np.inf)))]
