@@ -2153,7 +2153,7 @@ def _auto_counts(options, tiers, spectra):
     ``watch``: the same case with ``spectra`` traced, where the counts cannot be chosen
     (grid sizes are static); a gradient then warns at run time beyond ``CHECKED_SNR``
     (``_warn_traced_gradient_snr``). ``jmse``, ``lens_merit`` and ``optimise`` use it."""
-    if options["se_nodes"] is None or not _snr_peaks(options["peaks"], tiers):
+    if not _chooses_counts(options, tiers):
         return None, False  # no fine polar grid, or the default's tiers
     if not is_concrete(spectra):
         return None, True
@@ -2161,6 +2161,13 @@ def _auto_counts(options, tiers, spectra):
     with jax.ensure_compile_time_eval():
         snr = float(_peak_snr(*spectra))
     return (_above_own(options, _counts_for_snr(snr)) if snr > CHECKED_SNR else {}), False
+
+
+def _chooses_counts(options, tiers) -> bool:
+    """Whether calls with the resolved ``jmse`` options ``options`` (``tiers`` theirs) take
+    the low-noise counts by themselves (``_auto_counts``): a fine polar grid with the peaks
+    and without the default's tiers (``"high"``)."""
+    return options["se_nodes"] is not None and _snr_peaks(options["peaks"], tiers)
 
 
 def _raised(static, counts):

@@ -31,7 +31,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._aberrations import Seidel
-from ._merit import U_MAX, _peak_snr, _snr_peaks, jmse, jmse_options
+from ._merit import U_MAX, _chooses_counts, _peak_snr, jmse, jmse_options
 from ._numerics import all_finite, check_count
 
 __all__ = ["SweepResult", "SweepStatus", "hypercube", "sweep", "sweep_jmse"]
@@ -775,7 +775,7 @@ def hypercube(**axes) -> dict[str, np.ndarray]:
 _PEAK_CHUNK = 4096
 
 
-def _with_sweep_counts(preset, options, u, signal, noise):
+def _with_sweep_counts(preset, options, resolved, u, signal, noise):
     """``options`` with the counts ``"high"`` takes by itself at low noise (``jmse``'s
     ``otf_radial`` and ``grad_se_angular``: ``_optimise._with_gradient_counts``, as
     ``lens_merit`` passes them), chosen here from the sweep's concrete ``u``: inside the
@@ -784,16 +784,16 @@ def _with_sweep_counts(preset, options, u, signal, noise):
     gradient that warns at run time). The counts are those of the in-range ``u`` with the
     largest peak ``S_x / S_n``, so every design gets at least the counts it needs.
     Anything else (a traced ``u``, no ``u`` in range, options without the choice) is
-    returned as it is; bad arguments are then refused by ``jmse``'s own checks."""
+    returned as it is; bad arguments are then refused by ``jmse``'s own checks.
+    ``resolved``: ``jmse_options(preset, **options)``."""
     from ._optimise import _with_gradient_counts  # _optimise imports the merit, not this
 
-    try:
-        given = jmse_options(preset, **options)
-        values = np.unique(np.asarray(u, float).reshape(-1))
-    except (TypeError, ValueError, jax.errors.ConcretizationTypeError):
-        return options
-    if given["se_nodes"] is None or not _snr_peaks(given["peaks"], given["tiers"]):
+    if not _chooses_counts(resolved, resolved["tiers"]):
         return options  # not "high"-like: nothing to choose (spares the ratio's program)
+    try:
+        values = np.unique(np.asarray(u, float).reshape(-1))
+    except (TypeError, ValueError):  # a traced u (jax's conversion errors are TypeErrors)
+        return options
     values = values[np.isfinite(values) & (values > 0.0) & (values <= U_MAX)]
     if values.size == 0:
         return options
@@ -866,7 +866,7 @@ def sweep_jmse(
     >>> result.value.shape, result.status_counts()
     ((6,), {'OK': 6})
     """
-    jmse_options(preset, **options)  # ValueError now for a bad option
+    resolved = jmse_options(preset, **options)  # ValueError now for a bad option
     # Lists become arrays (a list would be read as a pytree of separate scalar leaves).
     aberrations = jax.tree_util.tree_map(
         lambda x: np.asarray(x, float) if isinstance(x, (list, tuple)) else x, aberrations,
@@ -883,7 +883,7 @@ def sweep_jmse(
                              f"got shape {np.shape(value)}")
     field = np.asarray(field, float) if isinstance(field, (list, tuple)) else field
     u = np.asarray(u, float) if isinstance(u, (list, tuple)) else u
-    options = _with_sweep_counts(preset, options, u, signal, noise)
+    options = _with_sweep_counts(preset, options, resolved, u, signal, noise)
 
     def in_range(design):
         f, v = design["field"], design["u"]
