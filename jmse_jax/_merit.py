@@ -1988,8 +1988,9 @@ def jmse(
         by itself, for the value and the gradient, where ``u`` and the spectra are
         concrete at a peak ratio beyond ``CHECKED_SNR``, unless grid options or any of
         the four counts are given. With them traced (a noise level swept under ``vmap``,
-        or an argument of your ``jit``) the value is its own grid's, and a gradient warns
-        at run time (``grad_se_angular``). Time: at the Fig. 1 point 160 radial OTF
+        or an argument of your ``jit``) the value is its own grid's and warns at run
+        time beyond ``CHECKED_SNR``, naming the count to give, as a gradient does
+        (``grad_se_angular``). Time: at the Fig. 1 point 160 radial OTF
         nodes add about 50 ms to ``"high"``'s 82 ms value, and 64 ms to its 234 ms
         ``value_and_grad`` with 1920 angular fine nodes (docs/accuracy.md).
     grad_otf_radial : int or None
@@ -2085,9 +2086,10 @@ def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
     derivatives alike; with ``gradient_static`` (``_raised``: more angular fine S_e
     nodes) its derivatives are that program's while the value stays ``static``'s, so it
     does not change with differentiation (the gradient costs the finer program's
-    ``value_and_grad`` plus this value); with ``watch`` every gradient checks the peak
-    ``S_x / S_n`` and warns beyond ``CHECKED_SNR`` (``_warn_traced_gradient_snr``; a host
-    callback, about 0.1 ms).
+    ``value_and_grad`` plus this value); with ``watch`` every value and every gradient
+    checks the peak ``S_x / S_n`` and warns beyond ``CHECKED_SNR`` (``_warn_traced_snr``;
+    a host callback, about 0.1 ms; a value alone warns only where the radial OTF nodes,
+    which hold values, fall short).
 
     Jitted, as ``_traced_merit`` is: a transformation applied without ``jit`` then traces
     the wrappers once and reuses the program (an eager ``jax.grad`` of the Fig. 1 point
@@ -2104,9 +2106,17 @@ def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
     merit = by_design(functools.partial(_traced_merit, static))
     finer = functools.partial(_traced_merit, gradient_static or static)
 
+    own = tuple(_own_counts(static.value[0]).items()) if watch else None
+
+    def checked(value, inputs, gradient):
+        if not watch:
+            return value
+        return _run_time_check(value, functools.partial(_warn_traced_snr, own, gradient),
+                               _peak_snr(*inputs[2:]))
+
     @jax.custom_jvp
     def call(inputs):
-        return merit(inputs)
+        return checked(merit(inputs), inputs, False)
 
     def call_jvp(primals, tangents):
         (inputs,), (d_inputs,) = primals, tangents
@@ -2114,14 +2124,28 @@ def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
         value, gradient = by_design(_value_and_grad(finer, wrt))(inputs)
         if gradient_static is not None:
             value = merit(inputs)
-        if watch:
-            own = tuple(_own_counts(static.value[0]).items())
-            jax.debug.callback(functools.partial(_warn_traced_gradient_snr, own),
-                               _peak_snr(*inputs[2:]))
+        value = checked(value, inputs, True)
         return value, _tangent(value, gradient, live)
 
     call.defjvp(call_jvp, symbolic_zeros=True)
     return call(inputs)
+
+
+def _run_time_check(value, check, snr):
+    """``value``, once ``check`` has seen ``snr`` on the host when the program runs (a
+    ``pure_callback`` whose zero is added to ``value``, so it is not dropped). Under
+    ``vmap`` ``check`` runs once per batch with the batch's ratios (``jax.debug.callback``
+    unrolls a batch into one callback per design: a ``vmap`` of 5000 traced calls took
+    59 s more to compile), and it takes no derivative (its input is a constant to them)."""
+    snr = jax.lax.stop_gradient(snr)
+
+    def host(ratios):
+        check(ratios)
+        return np.zeros(np.shape(ratios), snr.dtype)
+
+    zero = jax.pure_callback(host, jax.ShapeDtypeStruct(snr.shape, snr.dtype), snr,
+                             vmap_method="expand_dims")
+    return value + zero.astype(value.dtype)
 
 
 def _low_noise_statics(static, spectra, given, auto):
@@ -2151,8 +2175,9 @@ def _auto_counts(options, tiers, spectra):
     ``(u, signal, noise)`` as given, are concrete: ``{}`` there at a peak ``S_x / S_n``
     within ``CHECKED_SNR`` (the own counts hold), None where the choice does not apply.
     ``watch``: the same case with ``spectra`` traced, where the counts cannot be chosen
-    (grid sizes are static); a gradient then warns at run time beyond ``CHECKED_SNR``
-    (``_warn_traced_gradient_snr``). ``jmse``, ``lens_merit`` and ``optimise`` use it."""
+    (grid sizes are static); a gradient then warns at run time beyond ``CHECKED_SNR``,
+    and a value where its radial OTF nodes fall short (``_warn_traced_snr``). ``jmse``,
+    ``lens_merit`` and ``optimise`` use it."""
     if not _chooses_counts(options, tiers):
         return None, False  # no fine polar grid, or the default's tiers
     if not is_concrete(spectra):
@@ -2197,27 +2222,41 @@ def _own_counts(options):
             for floor, entry, index in _FLOORS}
 
 
-def _warn_traced_gradient_snr(own, snr):
-    """The run-time warning of a gradient of ``"high"`` (the peaks without the default's
-    tiers) whose ``u`` or spectra were traced (``_auto_counts``'s ``watch``), at the
-    peak ratios ``snr`` (one per design); ``own``: ``_own_counts`` of the grid, as
-    ``((floor, count), ...)``."""
+def _warn_traced_snr(own, gradient, snr):
+    """The run-time warning of a call of ``"high"`` (the peaks without the default's tiers)
+    whose ``u`` or spectra were traced (``_auto_counts``'s ``watch``), at the peak ratios
+    ``snr`` (one per design): for a gradient (``gradient``) beyond ``CHECKED_SNR``, for a
+    value alone where ``OTF_RADIAL_BY_SNR`` asks for more radial OTF nodes than the grid's
+    (the value's count, ``_VALUE_FLOORS``; without them a value was up to 6.2e-5 off at
+    2e8); beyond ``CHECKED_SNR_PEAKS``, where no count was checked, it says so, as the
+    concrete call's warning does (``_warn_beyond_checked_snr``). ``own``: ``_own_counts``
+    of the grid, as ``((floor, count), ...)``."""
     snr = np.asarray(snr)
     snr = snr[np.isfinite(snr)]  # out-of-range inputs give +inf values and zero gradients
     if snr.size == 0 or snr.max() <= CHECKED_SNR:
         return
     counts = _counts_for_snr(float(snr.max()))
     own = dict(own)
-    give = ", ".join(f"grad_{floor}={counts[floor]}" for floor, _, _ in _FLOORS
-                     if counts[floor] > own[floor]) or "nothing more"
-    have = ", ".join(f"{own[floor]} {_FLOOR_WORDS[floor]}" for floor, _, _ in _FLOORS)
+    floors = [floor for floor, _, _ in _FLOORS if gradient or floor in _VALUE_FLOORS]
+    short = [floor for floor in floors if counts[floor] > own[floor]]
+    if not gradient and not short:
+        return
+    prefix = "grad_" if gradient else ""
+    give = ", ".join(f"{prefix}{floor}={counts[floor]}" for floor in short) or "nothing more"
+    have = ", ".join(f"{own[floor]} {_FLOOR_WORDS[floor]}" for floor in floors)
+    tables = ", ".join(f"{floor.upper()}_BY_SNR" for floor in floors)
+    helpers = ", ".join(f"jmse_jax.{floor}_for" for floor in floors)
+    also = ", or se_angular and otf_radial," if gradient else ""
+    what = "gradient" if gradient else "value"
+    beyond = (f"; beyond {CHECKED_SNR_PEAKS:.0e} (CHECKED_SNR_PEAKS) no counts were checked, "
+              f"and the {what} may be off by more than 1e-4 with these: give finer grids "
+              f"and compare two of them" if snr.max() > CHECKED_SNR_PEAKS else "")
     warnings.warn(
-        f"jmse's gradient at a peak S_x / S_n of {snr.max():.2g}, beyond {CHECKED_SNR:.0e}, "
+        f"jmse's {what} at a peak S_x / S_n of {snr.max():.2g}, beyond {CHECKED_SNR:.0e}, "
         f"with {have}: with u or the spectra traced jmse cannot choose the counts that hold "
-        f"it (SE_ANGULAR_BY_SNR, OTF_RADIAL_BY_SNR), and preset='high''s own hold its "
-        f"gradient only to {CHECKED_SNR:.0e}; pass {give} (jmse_jax.se_angular_for, "
-        f"jmse_jax.otf_radial_for of (u, signal, noise)), or se_angular and otf_radial, "
-        f"to jmse",
+        f"it ({tables}), and preset='high''s own hold its {what} only to "
+        f"{CHECKED_SNR:.0e}; pass {give} ({helpers} of (u, signal, noise)){also} to jmse"
+        f"{beyond}",
         UserWarning, stacklevel=2)
 
 

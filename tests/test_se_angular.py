@@ -380,7 +380,8 @@ def test_traced_spectra_warn_at_run_time(small_radial_table):
     """With the noise traced (an argument of the caller's ``jit``, differentiated, here
     under ``vmap``) the counts cannot be chosen: each gradient checks the peak ratio when
     it runs and warns beyond ``CHECKED_SNR``, naming the counts; inside it, silence. The
-    value and the gradient are the call's own grid's."""
+    value and the gradient are the call's own grid's, and a value alone warns too, naming
+    the radial count."""
     program = jax.jit(jax.vmap(jax.value_and_grad(_steep, argnums=(0, 1)), in_axes=(None, 0)))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -394,8 +395,47 @@ def test_traced_spectra_warn_at_run_time(small_radial_table):
     assert _relative(grad[1], _steep_gradient(48)) < 1e-12
     # The value too is the own grid's (24 radial OTF nodes; a count given turns the
     # choice off), not the eager call's, which takes the radial count.
-    assert float(value[1]) == pytest.approx(
-        float(_steep(STEEP_C, STEEP_NOISE, otf_radial=24)), rel=1e-13)
+    own_value = float(_steep(STEEP_C, STEEP_NOISE, otf_radial=24))
+    assert float(value[1]) == pytest.approx(own_value, rel=1e-13)
+    assert own_value != float(_steep(STEEP_C, STEEP_NOISE))
+    # A value alone warns as well, naming the radial count that holds values (the angular
+    # one holds gradients alone); within CHECKED_SNR, silence.
+    values = jax.jit(jax.vmap(_steep, in_axes=(None, 0)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jax.block_until_ready(values(STEEP_C, jnp.full(2, 100 * STEEP_NOISE)))
+    with pytest.warns(UserWarning, match=r"jmse's value at a peak S_x / S_n of 1\.5e\+07.*"
+                                         r"with 24 radial OTF nodes: .*OTF_RADIAL_BY_SNR\).*"
+                                         rf"pass otf_radial={STEEP_RADIAL} "):
+        traced = jax.block_until_ready(
+            values(STEEP_C, jnp.array([100 * STEEP_NOISE, STEEP_NOISE])))
+    assert float(traced[1]) == pytest.approx(own_value, rel=1e-13)
+    # Beyond CHECKED_SNR_PEAKS no count was checked, and the warning says so.
+    with pytest.warns(UserWarning, match=r"peak S_x / S_n of 1\.5e\+09.*pass otf_radial="
+                                         rf"{STEEP_RADIAL} .*beyond 2e\+08 "
+                                         r"\(CHECKED_SNR_PEAKS\) no counts were checked"):
+        jax.block_until_ready(values(STEEP_C, jnp.array([STEEP_NOISE, STEEP_NOISE / 100])))
+
+
+def test_run_time_check_runs_once_per_batch():
+    """The run-time check sees a ``vmap``'s ratios in one host call (``jax.debug.callback``
+    unrolled a batch into one callback per design: 59 s more to compile 5000), leaves the
+    value as it is and passes derivatives through untouched."""
+    from jmse_jax._merit import _run_time_check
+
+    seen = []
+
+    def f(x):
+        return _run_time_check(x ** 2, lambda r: seen.append(np.array(r)), 3.0 * x)
+
+    x = jnp.linspace(0.5, 2.0, 500)
+    values, grads = jax.jit(jax.vmap(jax.value_and_grad(f)))(x)
+    jax.block_until_ready(grads)
+    assert len(seen) == 1 and seen[0].shape == (500,)
+    np.testing.assert_array_equal(seen[0], 3.0 * np.asarray(x))
+    np.testing.assert_array_equal(values, x ** 2)
+    np.testing.assert_allclose(grads, 2.0 * x, rtol=1e-15)
+    assert float(jax.grad(jax.grad(f))(1.5)) == 2.0
 
 
 def test_lens_merit_passes_the_count_on(monkeypatch, small_radial_table):
