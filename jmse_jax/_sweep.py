@@ -11,8 +11,11 @@ order, with the inputs kept beside them and a status per design.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import enum
+import functools
 import importlib
 import json
 import math
@@ -20,6 +23,7 @@ import os
 import platform
 import sys
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
@@ -31,8 +35,22 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._aberrations import Seidel
-from ._merit import U_MAX, _chooses_counts, _peak_snr, jmse, jmse_options
-from ._numerics import all_finite, check_count
+from ._merit import (
+    U_MAX,
+    _beyond_checked,
+    _cancellation_message,
+    _chooses_counts,
+    _concrete_choice,
+    _peak_snr,
+    _prepare,
+    _slope_message,
+    _snr_peaks,
+    _strength_message,
+    _warn_beyond_checked_snr,
+    jmse,
+    jmse_options,
+)
+from ._numerics import all_finite, check_count, is_concrete
 
 __all__ = ["SweepResult", "SweepStatus", "hypercube", "sweep", "sweep_jmse"]
 
@@ -771,6 +789,104 @@ def hypercube(**axes) -> dict[str, np.ndarray]:
     return {name: grid.reshape(-1) for name, grid in zip(arrays, grids, strict=True)}
 
 
+#: Designs per evaluation of ``_concrete_choice`` in ``warn_like_jmse`` (batches of fewer
+#: take the next power of two, so that few programs are compiled).
+_CHECK_CHUNK = 1024
+#: The grid options: given any of them, the grids are the caller's own sizing, and ``jmse``
+#: gives no warning for designs beyond what the presets were checked at.
+_GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
+                 "overlap_floor")
+#: Set (``_checked_already``) by a caller that gave ``warn_like_jmse``'s warnings itself,
+#: so that ``sweep_jmse`` does not give them twice (the command line prints them first).
+_CHECKED_ALREADY = contextvars.ContextVar("jmse_jax_checked_already", default=False)
+
+
+@contextlib.contextmanager
+def _checked_already():
+    token = _CHECKED_ALREADY.set(True)
+    try:
+        yield
+    finally:
+        _CHECKED_ALREADY.reset(token)
+
+
+def beyond_message(message, value: float, beyond: int = 1, n: int = 1) -> str:
+    """``message`` (``_merit``'s strength, slope or cancellation warning) for the largest
+    ``value`` among ``beyond`` of ``n`` designs."""
+    return message(f"{value:.3g}" if n == 1 else f"up to {value:.3g} ({beyond} of {n} designs)")
+
+
+@functools.lru_cache(maxsize=16)
+def _choice_program(static):
+    """The compiled batch of ``_concrete_choice`` for ``jmse``'s static ``static``:
+    ``(one-ray plan, strength, cancellation)`` per design."""
+
+    def one(*design):
+        _, _, symmetric, strength, cancellation = _concrete_choice(static, *design)
+        return symmetric, strength, cancellation
+
+    return jax.jit(jax.vmap(one))
+
+
+def warn_like_jmse(aberrations, field, u, signal, noise, options, stacklevel: int = 2):
+    """The warnings an eager ``jmse`` call gives a concrete design, for a batch of designs
+    that run traced (under ``vmap`` ``jmse`` cannot give them): ``aberration_strength``
+    beyond ``CHECKED_STRENGTH``, the wavefront slope beyond ``CHECKED_SLOPE``, terms that
+    cancel beyond what the preset was checked at (``BALANCED_CANCELLATION``, or
+    ``CHECKED_CANCELLATION`` with a preset's balanced grid: the default's and ``"high"``'s),
+    and the peak ``S_x / S_n`` beyond ``CHECKED_SNR`` (``CHECKED_SNR_PEAKS`` with the
+    closed-form peaks and for designs on the axis). One warning per kind, with the largest
+    value and how many designs; nothing where grid options are given (as ``jmse``).
+
+    ``aberrations``, ``field``, ``u``: leaves of leading axis (n,) or scalars (shared), as in
+    ``sweep``; designs out of range or not finite are left out (``jmse`` refuses those).
+    ``options``: ``jmse``'s keyword options, ``preset`` among them. The strength and
+    symmetry of each design are the library's own choice of plan (``_concrete_choice``,
+    compiled once per static and batch size), the bounds ``_beyond_checked``'s, the noise
+    check ``_warn_beyond_checked_snr``'s. ``stacklevel``: ``warnings.warn``'s, here (2 names
+    the line that called this)."""
+    if any(options.get(name) is not None for name in _GRID_OPTIONS):
+        return
+    designs, _ = _host_batch({"aberrations": aberrations, "field": field, "u": u})
+    field, u = designs["field"], designs["u"]
+    finite = np.all([np.isfinite(leaf).reshape(leaf.shape[0], -1).all(axis=1)
+                     for leaf in jax.tree_util.tree_leaves(designs)], axis=0)
+    keep = finite & (field >= 0.0) & (field <= 1.0) & (u > 0.0) & (u <= U_MAX)
+    n = int(keep.sum())
+    if n == 0:
+        return
+    designs = jax.tree_util.tree_map(lambda x: x[keep], designs)
+    ordered = (designs["aberrations"], designs["field"], designs["u"])
+    resolved = jmse_options(**options)
+    static, _ = _prepare((*jax.tree_util.tree_map(lambda x: x[0], ordered), signal, noise),
+                         resolved)
+    choice = _choice_program(static)
+    size = min(_CHECK_CHUNK, 1 << (n - 1).bit_length())
+    parts = []
+    for start in range(0, n, size):  # fixed-size blocks: one compiled program
+        index = np.minimum(np.arange(start, start + size), n - 1)
+        block = jax.tree_util.tree_map(lambda x, index=index: x[index], ordered)
+        parts.append([np.asarray(x)[: n - start] for x in choice(*block)])
+    symmetric, strength, cancellation = (np.concatenate(x) for x in zip(*parts, strict=True))
+    u = designs["u"]
+    balanced = static.value[4] is not None
+    strong, steep, cancelling, slope = _beyond_checked(strength, u, symmetric, cancellation,
+                                                       balanced=balanced)
+    cancelling_message = functools.partial(_cancellation_message, balanced=balanced)
+    for message, beyond, values in ((_strength_message, strong, strength),
+                                    (_slope_message, steep, slope),
+                                    (cancelling_message, cancelling, cancellation)):
+        if beyond.any():
+            warnings.warn(beyond_message(message, float(values[beyond].max()),
+                                         int(beyond.sum()), n),
+                          UserWarning, stacklevel=stacklevel)
+    # The one-ray plans integrate the peaks in closed form, as peaks=True does.
+    off_axis = ~symmetric.astype(bool)
+    u_max = jnp.asarray(np.max(u[off_axis] if off_axis.any() else u), u.dtype)
+    peaks = (not off_axis.any()) or _snr_peaks(resolved["peaks"], resolved["tiers"])
+    _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=stacklevel + 1, peaks=peaks)
+
+
 #: Distinct ``u`` per evaluation of the peak ratios in ``_with_sweep_counts``.
 _PEAK_CHUNK = 4096
 
@@ -845,6 +961,10 @@ def sweep_jmse(
         at low noise (``otf_radial_for``; ``se_angular_for`` for the gradient) for the
         in-range ``u`` with the largest peak ``S_x / S_n``, so every design gets at least
         the counts it needs (inside the sweep ``u`` is traced and ``jmse`` could not).
+        Before the sweep the designs get the warnings an eager ``jmse`` call gives
+        (``warn_like_jmse``: strength, wavefront slope, cancelling terms, peak ``S_x /
+        S_n`` beyond what the preset was checked at), one per kind with the largest value
+        and the number of designs; none with grid options given, as in ``jmse``.
     batch_size, chunks_per_call, devices, workers, progress, metadata
         As in ``sweep``.
 
@@ -884,6 +1004,10 @@ def sweep_jmse(
     field = np.asarray(field, float) if isinstance(field, (list, tuple)) else field
     u = np.asarray(u, float) if isinstance(u, (list, tuple)) else u
     options = _with_sweep_counts(preset, options, resolved, u, signal, noise)
+    if not _CHECKED_ALREADY.get() and is_concrete((aberrations, field, u)):
+        # Under vmap jmse cannot give its warnings for concrete designs: given here.
+        warn_like_jmse(aberrations, field, u, signal, noise, dict(options, preset=preset),
+                       stacklevel=3)
 
     def in_range(design):
         f, v = design["field"], design["u"]

@@ -10,7 +10,6 @@ here (the library itself never does so at import). Bad arguments give a one-line
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import math
 import os
@@ -23,7 +22,7 @@ import warnings
 from ._merit import U_MAX
 from ._numerics import check_range
 from ._reproduce import FIG1, FIG1_FIELD, FIG1_U
-from ._sweep import DEFAULT_ACCELERATOR_BATCH
+from ._sweep import DEFAULT_ACCELERATOR_BATCH, _checked_already
 
 COEFFICIENTS = ("w020", "w040", "w131", "w222", "w220", "w311", "w111")
 COEFFICIENT_NAMES = {"w020": "defocus", "w040": "spherical", "w131": "coma",
@@ -173,81 +172,16 @@ def _write_json(path, data):
     print(f"wrote {path}")
 
 
-def _beyond_message(message, value: float, beyond: int = 1, n: int = 1) -> str:
-    """``message`` (``_merit``'s strength or slope warning) for the largest ``value``
-    among ``beyond`` of ``n`` designs."""
-    return message(f"{value:.3g}" if n == 1 else f"up to {value:.3g} ({beyond} of {n} designs)")
+def warn_like_jmse(aberrations, field, u, signal, noise, preset: str) -> list:
+    """The library's warnings for designs that run under ``jit`` (``jmse_jax._sweep.
+    warn_like_jmse``: strength, wavefront slope, cancelling terms and peak ``S_x / S_n``
+    beyond what ``preset`` was checked at), each on stderr as one line; returns their
+    texts. Leaves of shape (n,), one design per row."""
+    from ._sweep import warn_like_jmse as library_warnings
 
-
-def warn_like_jmse(aberrations, field, u, signal, noise, preset: str, chunk: int = 1024) -> list:
-    """The warnings ``jmse`` gives a concrete design, for designs that run under ``jit`` (where
-    it cannot give them): ``aberration_strength`` beyond ``CHECKED_STRENGTH``, the wavefront
-    slope beyond ``CHECKED_SLOPE``, terms that cancel beyond what the preset was checked at
-    (``BALANCED_CANCELLATION``, or ``CHECKED_CANCELLATION`` with a preset's balanced
-    grid: the default's and ``"high"``'s), and peak ``S_x / S_n`` beyond ``CHECKED_SNR``
-    (``CHECKED_SNR_PEAKS`` for ``"high"`` and for designs on the axis).
-    Leaves of shape (n,), one design per row; the strength and symmetry of each come from the
-    library's own choice of plan (``_concrete_choice``), the bounds from ``_beyond_checked``,
-    the noise check is the library's (``_warn_beyond_checked_snr``). Each warning goes to
-    stderr as one line; returns their texts."""
-
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
-    from ._merit import (
-        _beyond_checked,
-        _cancellation_message,
-        _concrete_choice,
-        _prepare,
-        _slope_message,
-        _snr_peaks,
-        _strength_message,
-        _warn_beyond_checked_snr,
-        jmse_options,
-    )
-
-    designs = (aberrations, field, u)
-    n = int(np.shape(field)[0])
-    static, _ = _prepare((*jax.tree_util.tree_map(lambda x: x[0], designs), signal, noise),
-                         jmse_options(preset))
-
-    def _choice(*design):
-        _, _, sym, st, cancel = _concrete_choice(static, *design)
-        return sym, st, cancel
-
-    choice = jax.jit(jax.vmap(_choice))
-    size = min(n, chunk)
-    symmetric, strength, cancellation = [], [], []
-    for start in range(0, n, size):  # fixed-size blocks: one compiled program
-        index = np.minimum(np.arange(start, start + size), n - 1)
-        block = jax.tree_util.tree_map(lambda x, index=index: x[index], designs)
-        sym, st, cancel = choice(*block)
-        symmetric.append(np.asarray(sym)[: n - start])
-        strength.append(np.asarray(st)[: n - start])
-        cancellation.append(np.asarray(cancel)[: n - start])
-    symmetric, strength = np.concatenate(symmetric), np.concatenate(strength)
-    cancellation = np.concatenate(cancellation)
-    balanced = static.value[4] is not None
-    strong, steep, cancelling, slope = _beyond_checked(strength, np.asarray(u), symmetric,
-                                                       cancellation, balanced=balanced)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        cancelling_message = functools.partial(_cancellation_message, balanced=balanced)
-        for message, beyond, values in ((_strength_message, strong, strength),
-                                        (_slope_message, steep, slope),
-                                        (cancelling_message, cancelling, cancellation)):
-            if beyond.any():
-                warnings.warn(_beyond_message(message, float(values[beyond].max()),
-                                              int(beyond.sum()), n), UserWarning, stacklevel=2)
-        if not symmetric.all():
-            u_max = jnp.asarray(np.max(np.asarray(u)[~symmetric]), np.asarray(u).dtype)
-            options = jmse_options(preset)
-            _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=2,
-                                     peaks=_snr_peaks(options["peaks"], options["tiers"]))
-        else:  # every design on the axis: the one-ray plans integrate the peaks in closed form
-            u_max = jnp.asarray(np.max(np.asarray(u)), np.asarray(u).dtype)
-            _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=2, peaks=True)
+        library_warnings(aberrations, field, u, signal, noise, {"preset": preset})
     texts = [" ".join(str(w.message).split()) for w in caught]
     for text in texts:
         print(f"jmse-jax: warning: {text}", file=sys.stderr, flush=True)
@@ -564,14 +498,15 @@ def _cmd_sweep(args) -> int:
                    every + field, every + u, signal, noise, args.preset)
     print(f"sweep of {n} designs over {', '.join(f'{k} ({len(v)})' for k, v in axes.items())}; "
           f"preset {args.preset}, grad {args.grad}, {args.dtype}", flush=True)
-    result = jj.sweep_jmse(ab, field, u, signal, noise, grad=args.grad, preset=args.preset,
-                           batch_size=args.batch_size, workers=args.workers,
-                           progress=not args.quiet,
-                           metadata=dict(axes=axes, fixed=dict(fixed, field=args.field,
-                                                               u=args.u),
-                                         signal=args.signal, noise=args.noise,
-                                         preset=args.preset, dtype=args.dtype, grad=args.grad,
-                                         command="jmse-jax sweep"))
+    with _checked_already():  # the warnings above are sweep_jmse's own: not twice
+        result = jj.sweep_jmse(ab, field, u, signal, noise, grad=args.grad,
+                               preset=args.preset, batch_size=args.batch_size,
+                               workers=args.workers, progress=not args.quiet,
+                               metadata=dict(axes=axes, fixed=dict(fixed, field=args.field,
+                                                                   u=args.u),
+                                             signal=args.signal, noise=args.noise,
+                                             preset=args.preset, dtype=args.dtype,
+                                             grad=args.grad, command="jmse-jax sweep"))
     path = result.save(os.path.join(args.out, "sweep.npz"))
     values = np.asarray(result.value)
     ok = result.ok

@@ -7,6 +7,7 @@ import os
 import socket
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import jax
@@ -454,3 +455,57 @@ def test_sweep_jmse_takes_lists_as_arrays():
     with pytest.raises(ValueError, match=r"aberrations\.w020 must be a scalar or a 1-D array"):
         jj.sweep_jmse(jj.Seidel(w020=np.ones((2, 2))), 0.5, 0.2, SIGNAL, NOISE, progress=False,
                       **CHEAP)
+
+
+# --------------------------------------------------------------------------------------
+# sweep_jmse gives jmse's warnings for concrete designs
+# --------------------------------------------------------------------------------------
+
+
+def _sweep_warnings(monkeypatch, *args, **options):
+    """``sweep_jmse``'s warnings (as ``(message, filename)``), the sweep itself replaced by
+    a stand-in: the warnings come before anything is swept."""
+    import jmse_jax._sweep as sweep_module
+
+    monkeypatch.setattr(sweep_module, "sweep", lambda *a, **k: None)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        jj.sweep_jmse(*args, progress=False, **options)
+    return [(str(w.message), w.filename) for w in caught]
+
+
+def test_sweep_jmse_gives_the_eager_calls_warnings(monkeypatch):
+    """Under ``vmap`` ``jmse`` cannot warn for a design beyond what the presets were checked
+    at; ``sweep_jmse`` gives the eager call's warning before the sweep, once, with the
+    largest value and the number of designs, attributed to the caller's line. Designs out
+    of range or not finite are left out (the sweep marks them); with grid options, within
+    the checked range, or when the command line has given them already: none."""
+    from jmse_jax._sweep import _checked_already
+
+    w020 = np.array([1.0, 50.0, 60.0, 90.0, np.nan])
+    field = np.array([0.5, 0.5, 0.5, 2.0, 0.5])
+    ab = jj.Seidel(w020=w020, w131=0.3)
+    strength = [float(jj.aberration_strength(jj.Seidel(w020=w, w131=0.3), 0.5, 0.2))
+                for w in w020[:3]]
+    assert strength[0] < jj.CHECKED_STRENGTH < strength[1] < strength[2]
+    with pytest.warns(UserWarning) as eager:  # the oracle: the strongest design, eager
+        jj.jmse(jj.Seidel(w020=60.0, w131=0.3), 0.5, 0.2, SIGNAL, NOISE, preset="fast")
+    message = str(eager[0].message)
+    assert f"aberration_strength {strength[2]:.3g} is beyond" in message
+    expected = message.replace(f"{strength[2]:.3g}",
+                               f"up to {strength[2]:.3g} (2 of 3 designs)", 1)
+    assert _sweep_warnings(monkeypatch, ab, field, 0.2, SIGNAL, NOISE, preset="fast") == [
+        (expected, __file__)]
+    # Low noise: the peak ratio of the spectra, S_x(0) / S_n, past CHECKED_SNR (2e6).
+    ratio = float(SIGNAL(jnp.zeros(()), jnp.zeros(()))) / 1e-9
+    texts = _sweep_warnings(monkeypatch, jj.Seidel(w020=np.array([1.0, 2.0]), w131=0.3), 0.5,
+                            0.2, SIGNAL, jj.WhiteNoise(1e-9))
+    assert len(texts) == 1 and texts[0][0].startswith(
+        f"the peak signal-to-noise ratio max S_x/S_n = {ratio:.3g} is beyond what the polar "
+        f"grids of 'fast' and the default were checked at")
+    assert _sweep_warnings(monkeypatch, ab, field, 0.2, SIGNAL, NOISE, preset="fast",
+                           se_nodes=(200, 64)) == []
+    assert _sweep_warnings(monkeypatch, jj.Seidel(w020=w020[:1], w131=0.3), 0.5, 0.2, SIGNAL,
+                           NOISE, preset="fast") == []
+    with _checked_already():
+        assert _sweep_warnings(monkeypatch, ab, field, 0.2, SIGNAL, NOISE, preset="fast") == []
