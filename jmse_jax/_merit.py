@@ -2108,15 +2108,22 @@ def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
 
     own = tuple(_own_counts(static.value[0]).items()) if watch else None
 
-    def checked(value, inputs, gradient):
+    def checked(inputs, value, gradient=None):
+        """``value`` (and ``gradient``, a list of arrays) once the check has run."""
         if not watch:
-            return value
-        return _run_time_check(value, functools.partial(_warn_traced_snr, own, gradient),
-                               _peak_snr(*inputs[2:]))
+            return value, gradient
+        zero = _run_time_zero(functools.partial(_warn_traced_snr, own, gradient is not None),
+                              _peak_snr(*inputs[2:]))
+        # The zero goes into every output, so the check runs whichever is used (a jax.grad
+        # drops the value, and a pure callback whose result is unused is dropped with it);
+        # into the gradient as a factor 1 + 0, so that its derivatives (a jax.hessian) use
+        # it too.
+        return value + zero.astype(value.dtype), (
+            None if gradient is None else [g * (1 + zero.astype(g.dtype)) for g in gradient])
 
     @jax.custom_jvp
     def call(inputs):
-        return checked(merit(inputs), inputs, False)
+        return checked(inputs, merit(inputs))[0]
 
     def call_jvp(primals, tangents):
         (inputs,), (d_inputs,) = primals, tangents
@@ -2124,28 +2131,28 @@ def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
         value, gradient = by_design(_value_and_grad(finer, wrt))(inputs)
         if gradient_static is not None:
             value = merit(inputs)
-        value = checked(value, inputs, True)
+        value, gradient = checked(inputs, value, list(gradient))
         return value, _tangent(value, gradient, live)
 
     call.defjvp(call_jvp, symbolic_zeros=True)
     return call(inputs)
 
 
-def _run_time_check(value, check, snr):
-    """``value``, once ``check`` has seen ``snr`` on the host when the program runs (a
-    ``pure_callback`` whose zero is added to ``value``, so it is not dropped). Under
-    ``vmap`` ``check`` runs once per batch with the batch's ratios (``jax.debug.callback``
-    unrolls a batch into one callback per design: a ``vmap`` of 5000 traced calls took
-    59 s more to compile), and it takes no derivative (its input is a constant to them)."""
+def _run_time_zero(check, snr):
+    """A zero of ``snr``'s shape and dtype, computed once ``check`` has seen ``snr`` on the
+    host when the program runs (a ``pure_callback``: add the zero to every output that
+    must wait for the check, or the callback is dropped as unused). Under ``vmap``
+    ``check`` runs once per batch with the batch's ratios (``jax.debug.callback`` unrolls
+    a batch into one callback per design: a ``vmap`` of 5000 traced calls took 59 s more
+    to compile), and it takes no derivative (its input is a constant to them)."""
     snr = jax.lax.stop_gradient(snr)
 
     def host(ratios):
         check(ratios)
         return np.zeros(np.shape(ratios), snr.dtype)
 
-    zero = jax.pure_callback(host, jax.ShapeDtypeStruct(snr.shape, snr.dtype), snr,
+    return jax.pure_callback(host, jax.ShapeDtypeStruct(snr.shape, snr.dtype), snr,
                              vmap_method="expand_dims")
-    return value + zero.astype(value.dtype)
 
 
 def _low_noise_statics(static, spectra, given, auto):
