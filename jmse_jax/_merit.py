@@ -2056,7 +2056,25 @@ def jmse(
     if is_concrete(inputs):
         # On a design stronger than they were checked at: a warning.
         return _concrete_merit(static, inputs, warn=preset_grid)[0]
-    return _traced_entry(static, inputs, gradient_static, watch)
+    try:
+        return _traced_entry(static, inputs, gradient_static, watch)
+    except ValueError as error:  # raised while tracing: costs nothing at run time
+        if _SECOND_REVERSE not in str(error):
+            raise
+        raise ValueError(
+            "jmse cannot be differentiated in reverse mode through one of its own "
+            "derivatives (jax.grad of jax.grad, jax.jacrev of jax.jacrev, jax.grad of a "
+            "jax.jvp) with the default's tiers or the closed-form peaks "
+            "(preset='high', peaks=True): JAX cannot linearize their derivative rules a "
+            "second time. Take second derivatives forward over reverse instead: "
+            "jax.hessian(f), jax.jacfwd(jax.grad(f)), or jax.jvp of jax.grad(f) for one "
+            "direction (docs/conventions.md, 'Second derivatives')") from error
+
+
+#: The start of JAX's error when reverse mode linearizes the derivative rule of the tier
+#: switch or of the peaks' branch a second time (``jax.grad(jax.grad(jmse))``), which
+#: ``jmse`` turns into an error that says what to do instead.
+_SECOND_REVERSE = "Linearization failed to produce known values"
 
 
 #: Backends on which ``vmap`` of ``jmse`` (and of its derivatives) runs the batch's designs

@@ -331,3 +331,18 @@ def test_second_derivatives_with_the_peaks():
     np.testing.assert_allclose(hessian, differences, rtol=1e-5,
                                atol=1e-6 * np.max(np.abs(hessian)))
     np.testing.assert_allclose(hessian, hessian.T, rtol=1e-12)
+
+
+def test_reverse_over_a_derivative_says_what_to_use():
+    """Reverse mode over a derivative of ``jmse`` with the peaks (``jax.grad`` of
+    ``jax.grad``) fails inside JAX while tracing; the error says to take second
+    derivatives forward over reverse (``jax.hessian``) instead of JAX's own message."""
+
+    def merit(u):
+        return jj.jmse(jj.Seidel(w020=1.0, w131=0.5), 0.7, u, jj.MarkovSignal(1.0, 5.0),
+                       jj.WhiteNoise(1e-3), preset="fast", peaks=True)
+
+    with pytest.raises(ValueError, match=r"reverse mode through one of its own derivatives"
+                                         r".*jax\.hessian\(f\)") as raised:
+        jax.make_jaxpr(jax.grad(jax.grad(merit)))(0.3)
+    assert "Linearization failed" in str(raised.value.__cause__)
