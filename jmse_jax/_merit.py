@@ -26,6 +26,7 @@ from ._numerics import (
     check_finite_tree,
     check_range,
     common_dtype,
+    concrete_primal,
     is_concrete,
     one_at_a_time,
     select_batch,
@@ -2056,6 +2057,11 @@ def jmse(
     if is_concrete(inputs):
         # On a design stronger than they were checked at: a warning.
         return _concrete_merit(static, inputs, warn=preset_grid)[0]
+    primal = concrete_primal(inputs) if preset_grid else None
+    if primal is not None:
+        # Differentiated outside jit (an eager jax.grad, jax.jvp): the same warnings.
+        _warn_design(static, primal,
+                     tuple(x.item() for x in _concrete_choice(static, *primal)), stacklevel=3)
     try:
         return _traced_entry(static, inputs, gradient_static, watch)
     except ValueError as error:  # raised while tracing: costs nothing at run time
@@ -2751,6 +2757,29 @@ def _beyond_checked(strength, u, symmetric, cancellation=1.0, balanced=False):
     return strong, steep, cancelling, slope
 
 
+def _warn_design(static, inputs, choice, stacklevel):
+    """The ``UserWarning`` of a concrete design (``inputs``, as ``jmse``'s) beyond what the
+    presets were checked at: its strength (``CHECKED_STRENGTH``), else its wavefront slope,
+    else its cancelling terms, and the peak ``S_x / S_n`` of the spectra. ``choice``: the
+    design's ``_concrete_choice`` as Python scalars; ``stacklevel``: ``warnings.warn``'s,
+    here (2 names the line that called this)."""
+    _, _, symmetric, strength, cancellation = choice
+    balanced = static.value[4] is not None
+    strong, steep, cancelling, slope = _beyond_checked(
+        strength, float(inputs[2]), symmetric, cancellation, balanced=balanced)
+    if strong:
+        warnings.warn(_strength_message(f"{strength:.3g}"), UserWarning, stacklevel=stacklevel)
+    elif steep:
+        warnings.warn(_slope_message(f"{float(slope):.3g}"), UserWarning,
+                      stacklevel=stacklevel)
+    elif cancelling:
+        warnings.warn(_cancellation_message(f"{cancellation:.3g}", balanced), UserWarning,
+                      stacklevel=stacklevel)
+    # The one-ray plans integrate the peaks in closed form, as peaks=True does.
+    _warn_beyond_checked_snr(*inputs[2:], stacklevel=stacklevel + 1, peaks=bool(symmetric)
+                             or _snr_peaks(static.value[0]["peaks"], static.value[1]))
+
+
 def _concrete_merit(static, inputs, warn=False):
     """``jmse`` after validation, for concrete inputs: the plan this design takes is chosen
     first, and only the grids it needs are compiled (each once per process) and run.
@@ -2760,21 +2789,10 @@ def _concrete_merit(static, inputs, warn=False):
     (``CHECKED_STRENGTH``)."""
     dtype = static.value[3]
     plans = _base_plans(static, inputs[0])
-    index, by_strength, symmetric, strength, cancellation = (
-        x.item() for x in _concrete_choice(static, *inputs))
-    strong, steep, cancelling, slope = _beyond_checked(
-        strength, float(inputs[2]), symmetric, cancellation,
-        balanced=static.value[4] is not None)
-    if warn and strong:
-        warnings.warn(_strength_message(f"{strength:.3g}"), UserWarning, stacklevel=3)
-    elif warn and steep:
-        warnings.warn(_slope_message(f"{float(slope):.3g}"), UserWarning, stacklevel=3)
-    elif warn and cancelling:
-        warnings.warn(_cancellation_message(f"{cancellation:.3g}", static.value[4] is not None),
-                      UserWarning, stacklevel=3)
-    if warn:  # the one-ray plans integrate the peaks in closed form, as peaks=True does
-        _warn_beyond_checked_snr(*inputs[2:], stacklevel=4, peaks=bool(symmetric)
-                                 or _snr_peaks(static.value[0]["peaks"], static.value[1]))
+    choice = tuple(x.item() for x in _concrete_choice(static, *inputs))
+    index, by_strength, symmetric = choice[:3]
+    if warn:
+        _warn_design(static, inputs, choice, stacklevel=4)
     plan = plans[index]
     if symmetric:
         radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])

@@ -31,6 +31,7 @@ __all__ = [
     "cos_sin_2pi",
     "cos_sin_2pi_stacked",
     "gauss_legendre",
+    "concrete_primal",
     "is_concrete",
     "is_single_precision",
     "map_batch",
@@ -460,6 +461,26 @@ def all_finite(tree):
 def is_concrete(x) -> bool:
     """True when every leaf of ``x`` has a value now (not a tracer under jit/vmap/grad)."""
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(x))
+
+
+def concrete_primal(tree):
+    """``tree`` with each tracer replaced by the concrete value it carries, where every
+    leaf is concrete or a chain of forward-mode or linearisation tracers over a concrete
+    value (an eager ``jax.grad``, ``jax.jvp`` or ``jax.jacfwd``, nested or not); None
+    otherwise (under ``jit`` or ``vmap``). Reads the tracers' ``primal``."""
+
+    def value(leaf):
+        for _ in range(64):
+            if not isinstance(leaf, jax.core.Tracer):
+                return leaf
+            leaf = getattr(leaf, "primal", None)
+        return None
+
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    values = [value(leaf) for leaf in leaves]
+    if any(v is None for v in values):
+        return None
+    return jax.tree_util.tree_unflatten(treedef, values)
 
 
 def _describe(value) -> str:

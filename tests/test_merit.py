@@ -605,14 +605,23 @@ def test_non_finite_under_jit_is_inf_not_nan(fig1, bad):
 
 def test_design_beyond_the_checked_strength_warns():
     """Coefficients given in the wrong unit (nm for waves, say) make a design far stronger
-    than any preset was checked at: the value may be far off, so a concrete call warns. No
-    warning with grids of the caller's own, nor below the bound."""
+    than any preset was checked at: the value may be far off, so a concrete call warns, and
+    so does an eager ``jax.grad`` (its tracers carry the concrete design; since session 90),
+    at the caller's line. No warning with grids of the caller's own, nor below the bound."""
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
     strong = jj.Seidel(w020=300.0, w131=2.0)  # strength 426 at u = 0.5
     assert float(jj.aberration_strength(strong, 0.5, 0.5)) > jj.CHECKED_STRENGTH
-    with pytest.warns(UserWarning, match=r"aberration_strength 426 is beyond what the "
-                                         r"presets and the default's tiers were checked at"):
+    message = (r"aberration_strength 426 is beyond what the presets and the default's tiers "
+               r"were checked at")
+    with pytest.warns(UserWarning, match=message):
         jj.jmse(strong, 0.5, 0.5, signal, noise, preset="fast")
+
+    def merit(w020):
+        return jj.jmse(jj.Seidel(w020=w020, w131=2.0), 0.5, 0.5, signal, noise, preset="fast")
+
+    with pytest.warns(UserWarning, match=message) as caught:
+        assert np.isfinite(float(jax.grad(merit)(300.0)))
+    assert caught[0].filename == __file__
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         jj.jmse(strong, 0.5, 0.5, signal, noise, nodes=(8, 4), se_nodes=(16, 8),
