@@ -1973,9 +1973,10 @@ def jmse(
         the value). ``"high"`` takes ``se_angular_for``'s count by itself when ``u`` and
         the spectra are concrete at a peak ``S_x / S_n`` beyond ``CHECKED_SNR`` (a
         gradient in the coefficients, the field or a lens's parameters, ``lens_merit``
-        included), unless ``se_angular`` or grid options are given. With ``u`` or the
-        spectra traced (differentiated, or arguments of your ``jit``) it cannot see the
-        ratio: each gradient then checks it at run time and warns beyond
+        included; ``u`` and the spectra differentiated without ``jit`` count as concrete,
+        since their tracers carry the values), unless ``se_angular`` or grid options are
+        given. With ``u`` or the spectra traced by your ``jit`` or ``vmap`` it cannot see
+        the ratio: each gradient then checks it at run time and warns beyond
         ``CHECKED_SNR``, naming the count to give. Not with the default's tiers
         (``ValueError``); concrete calls, which return values only, ignore it.
     otf_radial : int or None
@@ -2205,13 +2206,17 @@ def _auto_counts(options, tiers, spectra):
     own counts hold its gradients only to ``CHECKED_SNR``) and ``spectra``, the arguments
     ``(u, signal, noise)`` as given, are concrete: ``{}`` there at a peak ``S_x / S_n``
     within ``CHECKED_SNR`` (the own counts hold), None where the choice does not apply.
+    Spectra differentiated without ``jit`` count as concrete (``concrete_primal``).
     ``watch``: the same case with ``spectra`` traced, where the counts cannot be chosen
     (grid sizes are static); a gradient then warns at run time beyond ``CHECKED_SNR``,
     and a value where its radial OTF nodes fall short (``_warn_traced_snr``). ``jmse``,
     ``lens_merit`` and ``optimise`` use it."""
     if not _chooses_counts(options, tiers):
         return None, False  # no fine polar grid, or the default's tiers
-    if not is_concrete(spectra):
+    # Differentiated without jit (an eager jax.grad in u or the noise), the tracers carry
+    # the concrete spectra.
+    spectra = spectra if is_concrete(spectra) else concrete_primal(spectra)
+    if spectra is None:
         return None, True
     # Concrete even inside a caller's jit, where the call would be staged out.
     with jax.ensure_compile_time_eval():

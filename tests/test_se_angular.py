@@ -329,7 +329,8 @@ def test_gradient_takes_the_count_by_itself_with_concrete_spectra(small_radial_t
     radial OTF nodes, the value that of the grid with those radial nodes and its own 48
     angular ones, as the eager call's. With a count given nothing is added, below
     ``CHECKED_SNR`` neither, and the ``grad_`` counts given are taken with traced spectra
-    too (``_low_noise_statics``; the program is the same)."""
+    too (``_low_noise_statics``; the program is the same). Spectra differentiated without
+    ``jit`` count as concrete (their tracers carry the values)."""
     assert jj.se_angular_for(STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(STEEP_NOISE)) == 1920
     assert jj.otf_radial_for(STEEP_U, STEEP_SIGNAL, jj.WhiteNoise(STEEP_NOISE)) == STEEP_RADIAL
     assert STEEP_RADIAL > PRESETS["fast"]["nodes"][0]
@@ -374,6 +375,18 @@ def test_gradient_takes_the_count_by_itself_with_concrete_spectra(small_radial_t
     assert traced(radial=96) == ((None, None), (None, 96), False)
     # Below the grid's own 48 and 24: nothing, and no run-time check (the counts are given).
     assert traced(angular=32, radial=16) == ((None, None), None, False)
+
+    def differentiated(transform):  # the noise a tracer of a derivative taken without jit
+        out = []
+        transform(lambda n: out.append(choice(jj.WhiteNoise(n))) or n)
+        return out[0]
+
+    # Its tracers carry the concrete noise: the counts of a concrete call.
+    concrete = ((None, STEEP_RADIAL), (1920, STEEP_RADIAL), False)
+    assert differentiated(lambda f: jax.grad(f)(STEEP_NOISE)) == concrete
+    assert differentiated(lambda f: jax.jvp(f, (STEEP_NOISE,), (1.0,))) == concrete
+    assert differentiated(lambda f: jax.jit(jax.grad(f))(STEEP_NOISE)) == (
+        (None, None), None, True)
 
 
 def test_traced_spectra_warn_at_run_time(small_radial_table):
