@@ -36,6 +36,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._aberrations import Seidel
 from ._merit import (
+    _GRID_OPTIONS,
     U_MAX,
     _beyond_checked,
     _cancellation_message,
@@ -792,10 +793,6 @@ def hypercube(**axes) -> dict[str, np.ndarray]:
 #: Designs per evaluation of ``_concrete_choice`` in ``warn_like_jmse`` (batches of fewer
 #: take the next power of two, so that few programs are compiled).
 _CHECK_CHUNK = 1024
-#: The grid options: given any of them, the grids are the caller's own sizing, and ``jmse``
-#: gives no warning for designs beyond what the presets were checked at.
-_GRID_OPTIONS = ("quadrature", "nodes", "se_nodes", "otf_method", "overlap_nodes",
-                 "overlap_floor")
 #: Set (``_checked_already``) by a caller that gave ``warn_like_jmse``'s warnings itself,
 #: so that ``sweep_jmse`` does not give them twice (the command line prints them first).
 _CHECKED_ALREADY = contextvars.ContextVar("jmse_jax_checked_already", default=False)
@@ -846,7 +843,7 @@ def warn_like_jmse(aberrations, field, u, signal, noise, options, stacklevel: in
     check ``_warn_beyond_checked_snr``'s. ``stacklevel``: ``warnings.warn``'s, here (2 names
     the line that called this)."""
     if any(options.get(name) is not None for name in _GRID_OPTIONS):
-        return
+        return  # the caller's own grids: jmse gives no such warning either
     designs, _ = _host_batch({"aberrations": aberrations, "field": field, "u": u})
     field, u = designs["field"], designs["u"]
     finite = np.all([np.isfinite(leaf).reshape(leaf.shape[0], -1).all(axis=1)
