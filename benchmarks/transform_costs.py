@@ -6,12 +6,17 @@ the persistent compilation cache is off), so "first call" includes tracing and c
 
 - ``eager value``: ``jj.jmse(ab, ...)`` on concrete inputs, no ``jit``;
 - ``eager grad``: ``jax.grad(jj.jmse)(ab, ...)``, no ``jit``;
+- ``eager hessian u``: ``jax.hessian`` in ``u`` (one variable), no ``jit``;
+- ``eager grad, whole program`` and ``eager hessian u, whole program``: the same with the
+  tiers' whole program differentiated, as before session 91 (derivatives taken without
+  ``jit`` now differentiate the grid the design takes alone, ``_merit._eager_derivative``;
+  here it is switched off);
 - ``eager otf``: ``jj.otf`` at one frequency, no ``jit``;
 - ``jit value``, ``jit value_and_grad``, ``jit jvp`` (one tangent in every coefficient):
   the first call is split into tracing (``lower``) and XLA compilation (``compile``).
 
 Warm times are the fastest of 11 calls after the first. Usage (from the repository root;
-~2 min on 2 cores)::
+~8 min on 2 cores, 4.5 of them the whole program's Hessian)::
 
     .venv/bin/python benchmarks/transform_costs.py [--tag NAME]
 
@@ -38,7 +43,8 @@ import jax.numpy as jnp  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
 
-MODES = ("eager value", "eager grad", "eager otf", "jit value", "jit value_and_grad",
+MODES = ("eager value", "eager grad", "eager grad, whole program", "eager hessian u",
+         "eager hessian u, whole program", "eager otf", "jit value", "jit value_and_grad",
          "jit jvp")
 WARM_CALLS = 11
 
@@ -60,11 +66,21 @@ def _measure(mode: str) -> dict:
         return jj.jmse(a, common.FIG1_FIELD, common.FIG1_U, signal, noise)
 
     if mode.startswith("eager"):
-        fn = {"eager value": merit, "eager grad": jax.grad(merit),
-              "eager otf": lambda a: jj.otf(a, 0.1, 0.05, common.FIG1_FIELD)}[mode]
+        if mode.endswith(", whole program"):
+            from jmse_jax import _merit
+
+            _merit._eager_derivative = lambda *args: None
+            mode = mode.removesuffix(", whole program")
+
+        def in_u(u):
+            return jj.jmse(ab, common.FIG1_FIELD, u, signal, noise)
+
+        fn, arg = {"eager value": (merit, ab), "eager grad": (jax.grad(merit), ab),
+                   "eager hessian u": (jax.hessian(in_u), jnp.asarray(common.FIG1_U)),
+                   "eager otf": (lambda a: jj.otf(a, 0.1, 0.05, common.FIG1_FIELD), ab)}[mode]
         start = time.perf_counter()
-        jax.block_until_ready(fn(ab))
-        return dict(first_s=time.perf_counter() - start, warm_s=_warm(fn, ab))
+        jax.block_until_ready(fn(arg))
+        return dict(first_s=time.perf_counter() - start, warm_s=_warm(fn, arg))
     args = (ab,)
     if mode == "jit value":
         fn = jax.jit(merit)

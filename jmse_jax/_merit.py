@@ -2029,8 +2029,8 @@ def jmse(
     2 s for the first design on a 2-core CPU, milliseconds per call after that). So does a
     derivative taken without ``jit`` (``jax.grad(jmse)(...)``, ``jax.hessian``; not under
     ``vmap``), whose tracers carry the concrete design: the grid is chosen on it, and only
-    that grid's derivative is compiled (about 5 s for the default's gradient at the Fig. 1
-    point, 45 s for the whole program), with the derivatives the traced program has. A
+    that grid's derivative is compiled (about 4 s for the default's gradient at the Fig. 1
+    point, 44 s for the whole program), with the derivatives the traced program has. A
     rotationally symmetric design takes the whole program there. Under an outer ``jit``
     these inner programs are inlined.
 

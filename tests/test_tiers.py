@@ -873,7 +873,7 @@ def test_calls_outside_jit_compile_once(monkeypatch):
                                rtol=1e-13)
 
     # Differentiated without jit, only the grid each design takes is compiled (once): the
-    # tiers' program is not (an eager jax.grad of the Fig. 1 point compiled for 45 s).
+    # tiers' program is not (an eager jax.grad of the Fig. 1 point compiled for 44 s).
     grad = jax.grad(merit)
     traced = _merit._traced_merit._cache_size()
     g_first = grad(ab)
@@ -891,7 +891,7 @@ def test_calls_outside_jit_compile_once(monkeypatch):
 def test_second_derivatives_outside_jit_differentiate_the_grid_taken(monkeypatch):
     """A Hessian taken without ``jit`` differentiates the grid the design takes alone
     (chosen on the concrete design its tracers carry), not the tiers' program: at the
-    Fig. 1 point that compiled for 266 s and now for 15 s. It equals central differences
+    Fig. 1 point that compiled for 280 s and now for 15 s. It equals central differences
     of the gradient in the coefficients and in ``u``; so does reverse mode over reverse
     mode (``jax.jacrev`` of ``jax.jacrev``), which the tiers' program refuses."""
     from jmse_jax import _merit
