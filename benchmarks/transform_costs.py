@@ -12,11 +12,12 @@ the persistent compilation cache is off), so "first call" includes tracing and c
   ``jit`` now differentiate the grid the design takes alone, ``_merit._eager_derivative``;
   here it is switched off);
 - ``eager otf``: ``jj.otf`` at one frequency, no ``jit``;
-- ``jit value``, ``jit value_and_grad``, ``jit jvp`` (one tangent in every coefficient):
+- ``jit value``, ``jit value_and_grad``, ``jit jvp`` (one tangent in every coefficient),
+  ``jit hessian u`` (``jax.hessian`` in ``u``, forward over reverse through every tier):
   the first call is split into tracing (``lower``) and XLA compilation (``compile``).
 
 Warm times are the fastest of 11 calls after the first. Usage (from the repository root;
-~8 min on 2 cores, 4.5 of them the whole program's Hessian)::
+~14 min on 2 cores, 9 of them the whole program's Hessian, eager and jitted)::
 
     .venv/bin/python benchmarks/transform_costs.py [--tag NAME]
 
@@ -45,7 +46,7 @@ import jmse_jax as jj  # noqa: E402
 
 MODES = ("eager value", "eager grad", "eager grad, whole program", "eager hessian u",
          "eager hessian u, whole program", "eager otf", "jit value", "jit value_and_grad",
-         "jit jvp")
+         "jit jvp", "jit hessian u")
 WARM_CALLS = 11
 
 
@@ -86,6 +87,9 @@ def _measure(mode: str) -> dict:
         fn = jax.jit(merit)
     elif mode == "jit value_and_grad":
         fn = jax.jit(jax.value_and_grad(merit))
+    elif mode == "jit hessian u":
+        fn = jax.jit(jax.hessian(lambda u: jj.jmse(ab, common.FIG1_FIELD, u, signal, noise)))
+        args = (jnp.asarray(common.FIG1_U),)
     else:
         fn = jax.jit(lambda a, t: jax.jvp(merit, (a,), (t,)))
         args = (ab, jax.tree_util.tree_map(jnp.ones_like, ab))
