@@ -2819,7 +2819,9 @@ def _eager_derivative(static, inputs, primal, choice):
     plan = plans[index]
     _, path = _eager_tier_choice(plan, dtype, primal)
     grid, shortcut = plan
-    grid = {"first": shortcut[4], "trial": shortcut[0]}.get(path, grid) if shortcut else grid
+    if path != "grid":  # a shortcut's grid was kept
+        trial_grid, _, _, _, first_grid, _ = shortcut
+        grid = first_grid if path == "first" else trial_grid
     return _grid_with_rule(_Static(grid), path == "first", dtype, inputs)
 
 
