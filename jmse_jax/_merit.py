@@ -2154,21 +2154,38 @@ def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
         return value + zero.astype(value.dtype), (
             None if gradient is None else [g * (1 + zero.astype(g.dtype)) for g in gradient])
 
+    def value_and_grad(wrt):
+        def run(inputs):
+            value, gradient = by_design(_value_and_grad(finer, wrt))(inputs)
+            if gradient_static is not None:
+                value = merit(inputs)
+            return checked(inputs, value, list(gradient))
+
+        return run
+
+    return _gradient_rule(lambda inputs: checked(inputs, merit(inputs))[0],
+                          value_and_grad)(inputs)
+
+
+def _gradient_rule(value, value_and_grad):
+    """``value`` (a function of one pytree of operands) whose tangent is the inner product
+    of ``value_and_grad(wrt)(operands)``'s gradient (a list, one array per leaf marked True
+    in ``wrt``) with the tangents of the leaves that carry one (``_live_tangents``): the
+    derivative rule of the tiers' switch, so that forward mode forms a reverse-mode
+    gradient and a Hessian (forward over reverse) keeps only that gradient."""
+
     @jax.custom_jvp
-    def call(inputs):
-        return checked(inputs, merit(inputs))[0]
+    def call(operands):
+        return value(operands)
 
     def call_jvp(primals, tangents):
-        (inputs,), (d_inputs,) = primals, tangents
-        wrt, live = _live_tangents(d_inputs)
-        value, gradient = by_design(_value_and_grad(finer, wrt))(inputs)
-        if gradient_static is not None:
-            value = merit(inputs)
-        value, gradient = checked(inputs, value, list(gradient))
-        return value, _tangent(value, gradient, live)
+        (operands,), (d_operands,) = primals, tangents
+        wrt, live = _live_tangents(d_operands)
+        out, gradient = value_and_grad(wrt)(operands)
+        return out, _tangent(out, list(gradient), live)
 
     call.defjvp(call_jvp, symbolic_zeros=True)
-    return call(inputs)
+    return call
 
 
 def _run_time_zero(check, snr):
@@ -2838,19 +2855,7 @@ def _grid_with_rule(grid, estimated, dtype, inputs):
             return _compiled_estimated(grid, dtype, operands)[0]
     else:
         value_of = functools.partial(_compiled_merit, grid, dtype)
-
-    @jax.custom_jvp
-    def call(operands):
-        return value_of(operands)
-
-    def call_jvp(primals, tangents):
-        (operands,), (d_operands,) = primals, tangents
-        wrt, live = _live_tangents(d_operands)
-        value, gradient = _value_and_grad(value_of, wrt)(operands)
-        return value, _tangent(value, list(gradient), live)
-
-    call.defjvp(call_jvp, symbolic_zeros=True)
-    return call(inputs)
+    return _gradient_rule(value_of, functools.partial(_value_and_grad, value_of))(inputs)
 
 
 def _concrete_merit(static, inputs, warn=False):
