@@ -11,6 +11,9 @@ the persistent compilation cache is off), so "first call" includes tracing and c
   tiers' whole program differentiated, as before session 91 (derivatives taken without
   ``jit`` now differentiate the grid the design takes alone, ``_merit._eager_derivative``;
   here it is switched off);
+- ``eager grad, on the axis`` (and ``, whole program``): ``jax.grad`` at the Fig. 1
+  design moved to the axis (field 0), where it is rotationally symmetric: its one-ray
+  plan alone is differentiated since session 92;
 - ``eager otf``: ``jj.otf`` at one frequency, no ``jit``;
 - ``jit value``, ``jit value_and_grad``, ``jit jvp`` (one tangent in every coefficient),
   ``jit hessian u`` (``jax.hessian`` in ``u``, forward over reverse through every tier):
@@ -19,7 +22,7 @@ the persistent compilation cache is off), so "first call" includes tracing and c
 Warm times are the fastest of 11 calls after the first. Usage (from the repository root;
 ~14 min on 2 cores, 9 of them the whole program's Hessian, eager and jitted)::
 
-    .venv/bin/python benchmarks/transform_costs.py [--tag NAME]
+    .venv/bin/python benchmarks/transform_costs.py [--tag NAME] [--modes MODE ...]
 
 Writes ``benchmarks/results/transform_costs[_NAME].json`` and ``.md``. To time an older
 commit, run it with ``PYTHONPATH`` set to a worktree of that commit and ``JMSE_COMMIT``
@@ -45,8 +48,9 @@ import jax.numpy as jnp  # noqa: E402
 import jmse_jax as jj  # noqa: E402
 
 MODES = ("eager value", "eager grad", "eager grad, whole program", "eager hessian u",
-         "eager hessian u, whole program", "eager otf", "jit value", "jit value_and_grad",
-         "jit jvp", "jit hessian u")
+         "eager hessian u, whole program", "eager grad, on the axis",
+         "eager grad, on the axis, whole program", "eager otf", "jit value",
+         "jit value_and_grad", "jit jvp", "jit hessian u")
 WARM_CALLS = 11
 
 
@@ -62,16 +66,21 @@ def _warm(fn, *args):
 def _measure(mode: str) -> dict:
     ab = jj.Seidel(**common.FIG1)
     signal, noise = common.fig1_signal(), common.fig1_noise()
-
-    def merit(a):
-        return jj.jmse(a, common.FIG1_FIELD, common.FIG1_U, signal, noise)
-
+    field = common.FIG1_FIELD
     if mode.startswith("eager"):
         if mode.endswith(", whole program"):
             from jmse_jax import _merit
 
             _merit._eager_derivative = lambda *args: None
             mode = mode.removesuffix(", whole program")
+        if mode.endswith(", on the axis"):
+            field = 0.0
+            mode = mode.removesuffix(", on the axis")
+
+    def merit(a):
+        return jj.jmse(a, field, common.FIG1_U, signal, noise)
+
+    if mode.startswith("eager"):
 
         def in_u(u):
             return jj.jmse(ab, common.FIG1_FIELD, u, signal, noise)
@@ -109,12 +118,15 @@ def main() -> None:
         return
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tag", default="", help="suffix of the output file names")
-    tag = parser.parse_args().tag
+    parser.add_argument("--modes", nargs="+", choices=MODES, default=MODES, metavar="MODE",
+                        help="the modes to time (default: all)")
+    args = parser.parse_args()
+    tag = args.tag
     name = "transform_costs" + (f"_{tag}" if tag else "")
     env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
     report = dict(description=__doc__.split("\n\n")[0], machine=common.machine_info(),
                   warm_calls=WARM_CALLS, modes={})
-    for mode in MODES:
+    for mode in args.modes:
         out = subprocess.run([sys.executable, __file__, "--child", mode], env=env,
                              capture_output=True, text=True, check=True).stdout
         report["modes"][mode] = json.loads(out.strip().splitlines()[-1])

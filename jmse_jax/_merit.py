@@ -2030,8 +2030,8 @@ def jmse(
     derivative taken without ``jit`` (``jax.grad(jmse)(...)``, ``jax.hessian``; not under
     ``vmap``), whose tracers carry the concrete design: the grid is chosen on it, and only
     that grid's derivative is compiled (about 4 s for the default's gradient at the Fig. 1
-    point, 44 s for the whole program), with the derivatives the traced program has. A
-    rotationally symmetric design takes the whole program there. Under an outer ``jit``
+    point, 44 s for the whole program), with the derivatives the traced program has; a
+    rotationally symmetric design compiles its one-ray plan alone. Under an outer ``jit``
     these inner programs are inlined.
 
     Examples
@@ -2823,16 +2823,21 @@ def _eager_derivative(static, inputs, primal, choice):
     call chooses it (``_eager_tier_choice``), and only that grid's program is
     differentiated, instead of the program of every tier. Its derivatives are those of
     the traced program (the gradient and Hessian of the grid whose value is returned).
-    None where this does not apply: a single plan (nothing to choose), a rotationally
-    symmetric design (its one-ray plan's derivatives are the polar grid's), or inputs
-    out of range (the traced program returns ``+inf``)."""
+    A rotationally symmetric design takes its one-ray plan, as the traced program does
+    where the one ray's first derivatives hold (``first_order_symmetric``; its second
+    derivatives are the polar grid's, ``_one_ray_merit``), and elsewhere its tier's polar
+    grid. None where this does not apply: a single plan and an asymmetric design (nothing
+    to choose), or inputs out of range (the traced program returns ``+inf``)."""
     plans = _base_plans(static, primal[0])
-    if len(plans) == 1 and plans[0][1] is None:
-        return None
-    index, _, symmetric = choice[:3]
-    if symmetric or not bool(_in_range(primal)):
+    index, by_strength, symmetric = choice[:3]
+    if (len(plans) == 1 and plans[0][1] is None and not symmetric) or not bool(
+            _in_range(primal)):
         return None
     dtype = static.value[3]
+    if symmetric and bool(primal[0].without_tilt().first_order_symmetric(primal[1])):
+        radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])
+        ray = radial_plans[int(len(radial_plans) > 1 and by_strength >= split)][0]
+        return _grid_with_rule(_Static(ray), False, dtype, inputs)
     plan = plans[index]
     _, path = _eager_tier_choice(plan, dtype, primal)
     grid, shortcut = plan

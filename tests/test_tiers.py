@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from compiled import assert_vmap_matches_singles, jmse_fn, jmse_value_and_grad_fn
+from oracles import richardson_difference
 from problems import REFERENCES
 from small_tiers import (
     SMALL as _SMALL,
@@ -916,6 +917,53 @@ def test_second_derivatives_outside_jit_differentiate_the_grid_taken(monkeypatch
     np.testing.assert_allclose(hessian, jnp.stack(columns, axis=1), rtol=1e-5,
                                atol=1e-7 * scale)
     np.testing.assert_allclose(reverse, hessian, rtol=1e-10, atol=1e-13 * scale)
+
+
+def _on_the_axis(monkeypatch):
+    """``SMALL_TIERS`` with the one-ray plans, and the merit of ``x = (w020, w040, field)``
+    at the Fig. 1 design's other coefficients, for designs on the axis."""
+    monkeypatch.setitem(jj.PRESETS["default"], "tiers", SMALL_TIERS)
+    monkeypatch.setitem(jj.PRESETS["default"], "balanced", None)
+    base = _coefficients(DESIGNS[1][0])
+
+    def merit(x):
+        return jj.jmse(jj.Seidel(**{**base, "w020": x[0], "w040": x[1]}), x[2], 0.2,
+                       SIGNAL, NOISE)
+
+    return merit, np.array([base["w020"], base["w040"], 0.0])
+
+
+def test_derivatives_on_the_axis_outside_jit_take_the_one_ray(monkeypatch):
+    """A design on the axis differentiated without ``jit`` compiles its one-ray plan alone,
+    not the tiers' program (which compiled for 40 s at the default's tiers): the gradient
+    in the radial terms equals Richardson differences of concrete calls (the one ray's
+    values), and the one in the field is zero (coma and astigmatism carry a power of it)."""
+    from jmse_jax import _merit
+
+    merit, x = _on_the_axis(monkeypatch)
+    traced = _merit._traced_merit._cache_size()
+    grad = np.asarray(jax.grad(merit)(jnp.asarray(x)))
+    assert _merit._traced_merit._cache_size() == traced
+    for i in (0, 1):
+        want = richardson_difference(merit, x, i, 1e-4)
+        assert grad[i] == pytest.approx(want, rel=1e-8)
+    assert grad[2] == 0.0
+
+
+@pytest.mark.slow
+def test_second_derivatives_on_the_axis_outside_jit_are_the_programs(monkeypatch):
+    """The Hessian of a design on the axis taken without ``jit`` is the traced program's:
+    the polar grid's second derivatives (``d^2 J / d field^2``, which the one ray gets
+    wrong, ``tests/test_radial.py``), bit for bit those of the jitted Hessian."""
+    from jmse_jax import _merit
+
+    merit, x = _on_the_axis(monkeypatch)
+    traced = _merit._traced_merit._cache_size()
+    eager = np.asarray(jax.hessian(merit)(jnp.asarray(x)))
+    assert _merit._traced_merit._cache_size() == traced
+    jitted = np.asarray(jax.jit(jax.hessian(merit))(jnp.asarray(x)))
+    np.testing.assert_allclose(eager, jitted, rtol=1e-12, atol=1e-15)
+    assert eager[2, 2] < -1e-3
 
 
 @pytest.mark.slow
