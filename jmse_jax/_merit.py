@@ -29,6 +29,7 @@ from ._numerics import (
     concrete_primal,
     is_concrete,
     one_at_a_time,
+    reverse_over_derivative,
     select_batch,
     spread_batch,
     with_batching_rule,
@@ -2837,6 +2838,11 @@ def _eager_derivative(static, inputs, primal, choice):
     if symmetric and bool(primal[0].without_tilt().first_order_symmetric(primal[1])):
         radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])
         ray = radial_plans[int(len(radial_plans) > 1 and by_strength >= split)][0]
+        if ray.get("peaks") and reverse_over_derivative(inputs):
+            # Reverse mode over the second derivatives of a polar grid with the peaks
+            # fails inside JAX (an AssertionError, then memory grew without bound); the
+            # tiers' program refuses it with a ValueError that says what to use.
+            return None
         return _grid_with_rule(_Static(ray), False, dtype, inputs)
     plan = plans[index]
     _, path = _eager_tier_choice(plan, dtype, primal)

@@ -483,6 +483,25 @@ def concrete_primal(tree):
     return jax.tree_util.tree_unflatten(treedef, values)
 
 
+def reverse_over_derivative(tree) -> bool:
+    """Whether a leaf of ``tree`` is traced by reverse mode over another derivative
+    (``jax.grad`` of ``jax.grad`` or of ``jax.jvp``, ``jax.jacrev`` of ``jax.jacrev``),
+    seen eagerly as in ``concrete_primal``: a linearisation tracer (JAX's ``jax.grad`` and
+    ``jax.vjp``) below the innermost tracer of its chain. False under forward over reverse
+    (``jax.hessian``) and where the chain cannot be read."""
+
+    def nested(leaf):
+        for depth in range(64):
+            if not isinstance(leaf, jax.core.Tracer):
+                return False
+            if depth and type(leaf).__name__ == "LinearizeTracer":
+                return True
+            leaf = getattr(leaf, "primal", None)
+        return False
+
+    return any(nested(leaf) for leaf in jax.tree_util.tree_leaves(tree))
+
+
 def _describe(value) -> str:
     arr = np.asarray(value)
     if arr.ndim == 0:

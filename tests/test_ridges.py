@@ -346,3 +346,42 @@ def test_reverse_over_a_derivative_says_what_to_use():
                                          r".*jax\.hessian\(f\)") as raised:
         jax.make_jaxpr(jax.grad(jax.grad(merit)))(0.3)
     assert "Linearization failed" in str(raised.value.__cause__)
+
+
+def test_reverse_over_a_derivative_on_the_axis_without_jit_says_what_to_use(monkeypatch):
+    """Differentiated without ``jit``, a design on the axis takes its one-ray plan alone,
+    whose second derivatives are a polar grid's, here with the peaks. Reverse mode over
+    them failed inside JAX with an ``AssertionError`` (and the process's memory then grew
+    without bound): such calls take the tiers' program, which refuses them with the
+    error that says what to use. Forward over reverse (``jax.hessian``) and a first
+    derivative still take the one ray (``_grid_with_rule``)."""
+    from jmse_jax import _merit
+    from jmse_jax._numerics import reverse_over_derivative
+
+    def merit(u):
+        return jj.jmse(jj.Seidel(w020=1.0, w131=0.5), 0.0, u, jj.MarkovSignal(1.0, 5.0),
+                       jj.WhiteNoise(1e-3), preset="fast", peaks=True)
+
+    seen = []
+
+    def probe(u):
+        seen.append(reverse_over_derivative(u))
+        return u * u
+
+    jax.grad(probe)(0.3)
+    jax.hessian(probe)(0.3)
+    jax.jvp(jax.grad(probe), (0.3,), (1.0,))
+    jax.grad(jax.grad(probe))(0.3)
+    jax.jacrev(jax.jacrev(probe))(0.3)
+    jax.grad(lambda u: jax.jvp(probe, (u,), (1.0,))[1])(0.3)
+    assert seen == [False, False, False, True, True, True]
+
+    calls = []
+    ruled = _merit._grid_with_rule
+    monkeypatch.setattr(_merit, "_grid_with_rule", lambda *a: calls.append(a) or ruled(*a))
+    assert float(jax.grad(merit)(0.3)) > 0.0
+    assert len(calls) == 1
+    monkeypatch.setattr(_merit, "_grid_with_rule",
+                        lambda *a: pytest.fail("reverse over reverse took the one ray"))
+    with pytest.raises(ValueError, match=r"reverse mode through one of its own derivatives"):
+        jax.grad(jax.grad(merit))(0.3)
