@@ -2073,6 +2073,8 @@ def jmse(
             eager = _eager_derivative(static, inputs, primal, choice)
             if eager is not None:
                 return eager
+        if reverse_over_derivative(inputs) and _one_ray_program_with_peaks(static, *inputs[:2]):
+            raise ValueError(f"{_SECOND_REVERSE}: {_ONE_RAY_REVERSE}")
         return _traced_entry(static, inputs, gradient_static, watch)
     except ValueError as error:  # raised while tracing: costs nothing at run time
         if _SECOND_REVERSE not in str(error):
@@ -2085,6 +2087,29 @@ def jmse(
             "second time. Take second derivatives forward over reverse instead: "
             "jax.hessian(f), jax.jacfwd(jax.grad(f)), or jax.jvp of jax.grad(f) for one "
             "direction (docs/conventions.md, 'Second derivatives')") from error
+
+
+#: Why ``jmse`` refuses reverse mode over a derivative of a one-ray plan with the peaks
+#: itself: JAX fails there only in the outer derivative's backward pass, outside ``jmse``,
+#: with an ``AssertionError`` (``fancy_bilinear_transpose``), and a process's memory then
+#: grew until it was killed (session 92).
+_ONE_RAY_REVERSE = "reverse mode over a derivative of a one-ray plan with the closed-form peaks"
+
+
+def _one_ray_program_with_peaks(static, aberrations, field) -> bool:
+    """Whether the traced program of ``static`` holds one-ray plans alone, one of them with
+    the closed-form peaks (``_plans_and_index``): a design whose structure makes it
+    rotationally symmetric (``radially_symmetric`` returns True: a Zernike set of radial
+    terms alone) under ``"high"``, ``peaks=True`` or the default (whose strong tiers'
+    one-ray plan has them). Where the polar grids are in the program too, reverse mode
+    over a derivative fails earlier, inside ``jmse``, with JAX's error that ``jmse``
+    rewrites."""
+    aberrations = aberrations.without_tilt()
+    if not static.value[2] or aberrations.radially_symmetric(field) is not True:
+        return False
+    plans = _tier_plans_of(static, _base_plans(static, aberrations))
+    radial, _ = _radial_plans(plans, static.value[6])
+    return any(plan.get("peaks") for plan, _ in radial)
 
 
 #: The start of JAX's error when reverse mode linearizes the derivative rule of the tier
@@ -2839,10 +2864,7 @@ def _eager_derivative(static, inputs, primal, choice):
         radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])
         ray = radial_plans[int(len(radial_plans) > 1 and by_strength >= split)][0]
         if ray.get("peaks") and reverse_over_derivative(inputs):
-            # Reverse mode over the second derivatives of a polar grid with the peaks
-            # fails inside JAX (an AssertionError, then memory grew without bound); the
-            # tiers' program refuses it with a ValueError that says what to use.
-            return None
+            raise ValueError(f"{_SECOND_REVERSE}: {_ONE_RAY_REVERSE}")
         return _grid_with_rule(_Static(ray), False, dtype, inputs)
     plan = plans[index]
     _, path = _eager_tier_choice(plan, dtype, primal)

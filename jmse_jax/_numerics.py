@@ -484,11 +484,12 @@ def concrete_primal(tree):
 
 
 def reverse_over_derivative(tree) -> bool:
-    """Whether a leaf of ``tree`` is traced by reverse mode over another derivative
-    (``jax.grad`` of ``jax.grad`` or of ``jax.jvp``, ``jax.jacrev`` of ``jax.jacrev``),
-    seen eagerly as in ``concrete_primal``: a linearisation tracer (JAX's ``jax.grad`` and
-    ``jax.vjp``) below the innermost tracer of its chain. False under forward over reverse
-    (``jax.hessian``) and where the chain cannot be read."""
+    """Whether a leaf of ``tree`` (a function's arguments) is traced by reverse mode over
+    another derivative taken inside it (``jax.grad`` of ``jax.grad`` or of ``jax.jvp``,
+    ``jax.jacrev`` of ``jax.jacrev``, with or without an outer ``jit`` or ``vmap``): a
+    linearisation tracer (``jax.grad``, ``jax.vjp``) below the innermost tracer of its
+    chain. False under forward over reverse (``jax.hessian``), for a first derivative, and
+    where the chain cannot be read (a ``jit`` between the two derivatives)."""
 
     def nested(leaf):
         for depth in range(64):

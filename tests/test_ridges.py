@@ -348,19 +348,15 @@ def test_reverse_over_a_derivative_says_what_to_use():
     assert "Linearization failed" in str(raised.value.__cause__)
 
 
-def test_reverse_over_a_derivative_on_the_axis_without_jit_says_what_to_use(monkeypatch):
-    """Differentiated without ``jit``, a design on the axis takes its one-ray plan alone,
-    whose second derivatives are a polar grid's, here with the peaks. Reverse mode over
-    them failed inside JAX with an ``AssertionError`` (and the process's memory then grew
-    without bound): such calls take the tiers' program, which refuses them with the
-    error that says what to use. Forward over reverse (``jax.hessian``) and a first
-    derivative still take the one ray (``_grid_with_rule``)."""
-    from jmse_jax import _merit
+def test_reverse_over_a_derivative_of_a_one_ray_plan_with_peaks_says_what_to_use():
+    """Reverse mode over a derivative of a one-ray plan with the peaks failed outside
+    ``jmse``, in the outer derivative's backward pass, with JAX's ``AssertionError``, and
+    the process's memory then grew until it was killed: on the axis without ``jit`` (where
+    the design takes its one-ray plan alone) and for a Zernike set of radial terms alone
+    (the program then holds the one-ray plans alone). ``jmse`` recognises such calls by
+    their tracers (``reverse_over_derivative``) and refuses them before tracing anything,
+    with the error that says what to use."""
     from jmse_jax._numerics import reverse_over_derivative
-
-    def merit(u):
-        return jj.jmse(jj.Seidel(w020=1.0, w131=0.5), 0.0, u, jj.MarkovSignal(1.0, 5.0),
-                       jj.WhiteNoise(1e-3), preset="fast", peaks=True)
 
     seen = []
 
@@ -372,16 +368,23 @@ def test_reverse_over_a_derivative_on_the_axis_without_jit_says_what_to_use(monk
     jax.hessian(probe)(0.3)
     jax.jvp(jax.grad(probe), (0.3,), (1.0,))
     jax.grad(jax.grad(probe))(0.3)
-    jax.jacrev(jax.jacrev(probe))(0.3)
+    jax.jit(jax.jacrev(jax.jacrev(probe)))(0.3)
     jax.grad(lambda u: jax.jvp(probe, (u,), (1.0,))[1])(0.3)
     assert seen == [False, False, False, True, True, True]
 
-    calls = []
-    ruled = _merit._grid_with_rule
-    monkeypatch.setattr(_merit, "_grid_with_rule", lambda *a: calls.append(a) or ruled(*a))
-    assert float(jax.grad(merit)(0.3)) > 0.0
-    assert len(calls) == 1
-    monkeypatch.setattr(_merit, "_grid_with_rule",
-                        lambda *a: pytest.fail("reverse over reverse took the one ray"))
-    with pytest.raises(ValueError, match=r"reverse mode through one of its own derivatives"):
-        jax.grad(jax.grad(merit))(0.3)
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+
+    def on_the_axis(u):
+        return jj.jmse(jj.Seidel(w020=1.0, w131=0.5), 0.0, u, signal, noise, preset="fast",
+                       peaks=True)
+
+    def radial_terms(c):
+        return jj.jmse(jj.Zernike(c, noll=(4, 11)), 0.3, 0.2, signal, noise)
+
+    for call in (lambda: jax.grad(jax.grad(on_the_axis))(0.3),
+                 lambda: jax.jit(jax.grad(lambda c: jax.grad(radial_terms)(c)[0]))(
+                     jnp.asarray([0.8, 0.3]))):
+        with pytest.raises(ValueError, match=r"reverse mode through one of its own "
+                                             r"derivatives.*jax\.hessian\(f\)") as raised:
+            call()
+        assert "one-ray plan with the closed-form peaks" in str(raised.value.__cause__)
