@@ -2107,8 +2107,7 @@ def _one_ray_program_with_peaks(static, aberrations, field) -> bool:
     aberrations = aberrations.without_tilt()
     if not static.value[2] or aberrations.radially_symmetric(field) is not True:
         return False
-    plans = _tier_plans_of(static, _base_plans(static, aberrations))
-    radial, _ = _radial_plans(plans, static.value[6])
+    radial, _ = _one_ray_plans_of(static, _base_plans(static, aberrations))
     return any(plan.get("peaks") for plan, _ in radial)
 
 
@@ -2437,6 +2436,19 @@ def _tier_plans_of(static, plans):
     return plans[:1 if tiers is None else len(tiers)]
 
 
+def _one_ray_plans_of(static, plans):
+    """The one-ray plans of ``static`` drawn from its ``plans`` (``_base_plans``) and the
+    first plan index of their second group (``_radial_plans``)."""
+    return _radial_plans(_tier_plans_of(static, plans), static.value[6])
+
+
+def _one_ray_plan_of(static, plans, by_strength):
+    """The one-ray plan a rotationally symmetric design of the concrete tier ``by_strength``
+    takes (its group's, ``_radial_plans``), as ``(options, None)``."""
+    radial, split = _one_ray_plans_of(static, plans)
+    return radial[int(len(radial) > 1 and by_strength >= split)]
+
+
 def _tier_of(static, aberrations, field, u, signal=None, noise=None, cancelling=False):
     """``(index, tier, cancellation)``: the plan (of ``_base_plans``) this design takes, its
     tier by ``aberration_strength`` alone (``_tier_index``), which picks its one-ray plan,
@@ -2542,7 +2554,7 @@ def _plans_and_index(static, aberrations, field, u, signal=None, noise=None):
     symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
     n_base = None
     if symmetric is not False:
-        radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])
+        radial_plans, split = _one_ray_plans_of(static, plans)
         group = (by_strength >= split).astype(jnp.int32) if len(radial_plans) > 1 else 0
         if symmetric is True:
             plans, index = radial_plans, group + jnp.zeros((), jnp.int32)
@@ -2861,8 +2873,7 @@ def _eager_derivative(static, inputs, primal, choice):
         return None
     dtype = static.value[3]
     if symmetric and bool(primal[0].without_tilt().first_order_symmetric(primal[1])):
-        radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])
-        ray = radial_plans[int(len(radial_plans) > 1 and by_strength >= split)][0]
+        ray = _one_ray_plan_of(static, plans, by_strength)[0]
         if ray.get("peaks") and reverse_over_derivative(inputs):
             raise ValueError(f"{_SECOND_REVERSE}: {_ONE_RAY_REVERSE}")
         return _grid_with_rule(_Static(ray), False, dtype, inputs)
@@ -2906,8 +2917,7 @@ def _concrete_merit(static, inputs, warn=False):
         _warn_design(static, inputs, choice, stacklevel=4)
     plan = plans[index]
     if symmetric:
-        radial_plans, split = _radial_plans(_tier_plans_of(static, plans), static.value[6])
-        plan = radial_plans[int(len(radial_plans) > 1 and by_strength >= split)]
+        plan = _one_ray_plan_of(static, plans, by_strength)
     value, path = _eager_tier_choice(plan, dtype, inputs)
     # A one-ray plan is drawn from the tiers by strength (not the balanced tier).
     return value, by_strength if symmetric else index, bool(symmetric), path
