@@ -29,6 +29,7 @@ from ._numerics import (
     concrete_primal,
     is_concrete,
     one_at_a_time,
+    refuse_reverse_over,
     reverse_over_derivative,
     select_batch,
     spread_batch,
@@ -2073,47 +2074,54 @@ def jmse(
             eager = _eager_derivative(static, inputs, primal, choice)
             if eager is not None:
                 return eager
-        if reverse_over_derivative(inputs) and _one_ray_program_with_peaks(static, *inputs[:2]):
-            raise ValueError(f"{_SECOND_REVERSE}: {_ONE_RAY_REVERSE}")
+        if _batching_program(static, inputs[0]):
+            # Reverse mode over a derivative of this program fails inside JAX, in places
+            # (in the outer backward pass, with an AssertionError, for one-ray plans with
+            # the peaks) and under forms (a jit between the two derivatives) that jmse
+            # cannot see: the program's inputs carry a refusal that the outer derivative
+            # meets first, as soon as it linearizes.
+            inputs = refuse_reverse_over(inputs, _REVERSE_OVER_DERIVATIVE)
         return _traced_entry(static, inputs, gradient_static, watch)
     except ValueError as error:  # raised while tracing: costs nothing at run time
         if _SECOND_REVERSE not in str(error):
             raise
-        raise ValueError(
-            "jmse cannot be differentiated in reverse mode through one of its own "
-            "derivatives (jax.grad of jax.grad, jax.jacrev of jax.jacrev, jax.grad of a "
-            "jax.jvp) with the default's tiers or the closed-form peaks "
-            "(preset='high', peaks=True): JAX cannot linearize their derivative rules a "
-            "second time. Take second derivatives forward over reverse instead: "
-            "jax.hessian(f), jax.jacfwd(jax.grad(f)), or jax.jvp of jax.grad(f) for one "
-            "direction (docs/conventions.md, 'Second derivatives')") from error
+        raise ValueError(_REVERSE_OVER_DERIVATIVE) from error
 
 
-#: Why ``jmse`` refuses reverse mode over a derivative of a one-ray plan with the peaks
-#: itself: JAX fails there only in the outer derivative's backward pass, outside ``jmse``,
-#: with an ``AssertionError`` (``fancy_bilinear_transpose``), and a process's memory then
-#: grew until it was killed (session 92).
+#: ``jmse``'s error for reverse mode over one of its own derivatives where JAX cannot take
+#: it (``_batching_program``).
+_REVERSE_OVER_DERIVATIVE = (
+    "jmse cannot be differentiated in reverse mode through one of its own derivatives "
+    "(jax.grad of jax.grad, jax.jacrev of jax.jacrev, jax.grad of a jax.jvp) with the "
+    "default's tiers or the closed-form peaks (preset='high', peaks=True): JAX cannot "
+    "linearize their derivative rules a second time. Take second derivatives forward "
+    "over reverse instead: jax.hessian(f), jax.jacfwd(jax.grad(f)), or jax.jvp of "
+    "jax.grad(f) for one direction (docs/conventions.md, 'Second derivatives')")
+
+
+def _batching_program(static, aberrations) -> bool:
+    """Whether the traced program of ``static`` holds a batching rule that reverse mode
+    cannot linearize a second time (``with_batching_rule``'s ``custom_vmap``): the switch
+    between several plans (the default's tiers, ``"high"``'s steep and balanced grids) or
+    the closed-form peaks' branch (``batch_skipping_cond``). A single plan without the
+    peaks (``"fast"``, grids given) has neither, and reverse over reverse works there."""
+    plans = _base_plans(static, aberrations)
+    return len(plans) > 1 or any(plan.get("peaks") for plan, _ in plans)
+
+
+#: Why ``_eager_derivative``, whose programs carry no ``refuse_reverse_over``, refuses
+#: reverse mode over a derivative of a one-ray plan with the peaks itself: JAX fails there
+#: only in the outer derivative's backward pass, outside ``jmse``, with an
+#: ``AssertionError`` (``fancy_bilinear_transpose``), and a process's memory then grew
+#: until it was killed (session 92).
 _ONE_RAY_REVERSE = "reverse mode over a derivative of a one-ray plan with the closed-form peaks"
-
-
-def _one_ray_program_with_peaks(static, aberrations, field) -> bool:
-    """Whether the traced program of ``static`` holds one-ray plans alone, one of them with
-    the closed-form peaks (``_plans_and_index``): a design whose structure makes it
-    rotationally symmetric (``radially_symmetric`` returns True: a Zernike set of radial
-    terms alone) under ``"high"``, ``peaks=True`` or the default (whose strong tiers'
-    one-ray plan has them). Where the polar grids are in the program too, reverse mode
-    over a derivative fails earlier, inside ``jmse``, with JAX's error that ``jmse``
-    rewrites."""
-    aberrations = aberrations.without_tilt()
-    if not static.value[2] or aberrations.radially_symmetric(field) is not True:
-        return False
-    radial, _ = _one_ray_plans_of(static, _base_plans(static, aberrations))
-    return any(plan.get("peaks") for plan, _ in radial)
 
 
 #: The start of JAX's error when reverse mode linearizes the derivative rule of the tier
 #: switch or of the peaks' branch a second time (``jax.grad(jax.grad(jmse))``), which
-#: ``jmse`` turns into an error that says what to do instead.
+#: ``jmse`` turns into an error that says what to do instead. ``refuse_reverse_over``
+#: refuses such calls before JAX meets it; this stays for a JAX whose partial-evaluation
+#: tracer is not named ``JaxprTracer``, which the sentinel reads.
 _SECOND_REVERSE = "Linearization failed to produce known values"
 
 

@@ -503,6 +503,73 @@ def reverse_over_derivative(tree) -> bool:
     return any(nested(leaf) for leaf in jax.tree_util.tree_leaves(tree))
 
 
+def _reverse_sentinel():
+    """The identity primitive of ``refuse_reverse_over``: its derivative rule raises
+    ``ValueError(message)`` when partial evaluation linearizes it (its tangent is then a
+    ``JaxprTracer``: reverse mode, ``jax.linearize``) and otherwise passes the primal
+    through itself again, so that forward mode of any order goes on as before."""
+    from jax.extend.core import Primitive
+    from jax.interpreters import ad, batching, mlir
+
+    sentinel = Primitive("jmse_reverse_over_derivative")
+    sentinel.def_impl(lambda x, *, message: x)
+    sentinel.def_abstract_eval(lambda x, *, message: x)
+
+    def jvp(primals, tangents, *, message):
+        (x,), (t,) = primals, tangents
+        if type(t).__name__ == "JaxprTracer":
+            raise ValueError(message)
+        return sentinel.bind(x, message=message), t
+
+    def batch(args, dims, *, message):
+        return sentinel.bind(args[0], message=message), dims[0]
+
+    ad.primitive_jvps[sentinel] = jvp
+    batching.primitive_batchers[sentinel] = batch
+    mlir.register_lowering(sentinel, lambda ctx, x, *, message: [x])
+    return sentinel
+
+
+_REVERSE_SENTINEL = _reverse_sentinel()
+
+
+def refuse_reverse_over(tree, message):
+    """``tree`` (a function's arguments) unchanged, such that reverse mode over a
+    derivative of what is computed from it raises ``ValueError(message)`` as soon as the
+    outer derivative linearizes, also where a ``jit`` between the two derivatives hides
+    the outer one from ``reverse_over_derivative`` (``jax.grad(jax.jit(jax.grad(f)))``).
+
+    An identity with a derivative rule (run by any derivative of the result) passes the
+    primal through ``_REVERSE_SENTINEL``, which thereby stays in the derivative's program,
+    and whose own derivative rule refuses to be linearized. A first derivative, forward or
+    reverse, never runs the sentinel's rule; forward over reverse (``jax.hessian``) runs it
+    in forward mode, which it allows. Only floating leaves take part; the values are the
+    same to the bit (both are identities)."""
+    def floating(leaf):
+        try:
+            return jnp.issubdtype(jnp.result_type(leaf), jnp.inexact)
+        except TypeError:  # not an array (a string, an object)
+            return False
+
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    marked = [i for i, leaf in enumerate(leaves) if floating(leaf)]
+    if not marked:
+        return tree
+
+    @jax.custom_jvp
+    def watched(values):
+        return values
+
+    @watched.defjvp
+    def watched_jvp(primals, tangents):
+        (values,), (d_values,) = primals, tangents
+        return [_REVERSE_SENTINEL.bind(v, message=message) for v in values], d_values
+
+    for i, leaf in zip(marked, watched([leaves[i] for i in marked]), strict=True):
+        leaves[i] = leaf
+    return jax.tree_util.tree_unflatten(treedef, leaves)
+
+
 def _describe(value) -> str:
     arr = np.asarray(value)
     if arr.ndim == 0:
