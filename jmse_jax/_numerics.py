@@ -503,8 +503,10 @@ def reverse_over_derivative(tree) -> bool:
     return any(nested(leaf) for leaf in jax.tree_util.tree_leaves(tree))
 
 
-def _reverse_sentinel():
-    """The identity primitive of ``refuse_reverse_over``: its derivative rule raises
+@functools.cache
+def _reverse_sentinel(message):
+    """The identity primitive of ``refuse_reverse_over`` for ``message`` (one per message,
+    so that no parameter clutters a printed jaxpr): its derivative rule raises
     ``ValueError(message)`` when partial evaluation linearizes it (its tangent is then a
     ``JaxprTracer``: reverse mode, ``jax.linearize``) and otherwise passes the primal
     through itself again, so that forward mode of any order goes on as before."""
@@ -512,25 +514,22 @@ def _reverse_sentinel():
     from jax.interpreters import ad, batching, mlir
 
     sentinel = Primitive("jmse_reverse_over_derivative")
-    sentinel.def_impl(lambda x, *, message: x)
-    sentinel.def_abstract_eval(lambda x, *, message: x)
+    sentinel.def_impl(lambda x: x)
+    sentinel.def_abstract_eval(lambda x: x)
 
-    def jvp(primals, tangents, *, message):
+    def jvp(primals, tangents):
         (x,), (t,) = primals, tangents
         if type(t).__name__ == "JaxprTracer":
             raise ValueError(message)
-        return sentinel.bind(x, message=message), t
+        return sentinel.bind(x), t
 
-    def batch(args, dims, *, message):
-        return sentinel.bind(args[0], message=message), dims[0]
+    def batch(args, dims):
+        return sentinel.bind(args[0]), dims[0]
 
     ad.primitive_jvps[sentinel] = jvp
     batching.primitive_batchers[sentinel] = batch
-    mlir.register_lowering(sentinel, lambda ctx, x, *, message: [x])
+    mlir.register_lowering(sentinel, lambda ctx, x: [x])
     return sentinel
-
-
-_REVERSE_SENTINEL = _reverse_sentinel()
 
 
 def refuse_reverse_over(tree, message):
@@ -540,11 +539,12 @@ def refuse_reverse_over(tree, message):
     the outer one from ``reverse_over_derivative`` (``jax.grad(jax.jit(jax.grad(f)))``).
 
     An identity with a derivative rule (run by any derivative of the result) passes the
-    primal through ``_REVERSE_SENTINEL``, which thereby stays in the derivative's program,
-    and whose own derivative rule refuses to be linearized. A first derivative, forward or
-    reverse, never runs the sentinel's rule; forward over reverse (``jax.hessian``) runs it
-    in forward mode, which it allows. Only floating leaves take part; the values are the
-    same to the bit (both are identities)."""
+    primal through ``_reverse_sentinel``'s primitive, which thereby stays in the
+    derivative's program, and whose own derivative rule refuses to be linearized. A first
+    derivative, forward or reverse, never runs the sentinel's rule; forward over reverse
+    (``jax.hessian``) runs it in forward mode, which it allows. Only floating leaves take
+    part; the values are the same to the bit (both are identities)."""
+
     def floating(leaf):
         try:
             return jnp.issubdtype(jnp.result_type(leaf), jnp.inexact)
@@ -563,7 +563,8 @@ def refuse_reverse_over(tree, message):
     @watched.defjvp
     def watched_jvp(primals, tangents):
         (values,), (d_values,) = primals, tangents
-        return [_REVERSE_SENTINEL.bind(v, message=message) for v in values], d_values
+        sentinel = _reverse_sentinel(message)
+        return [sentinel.bind(v) for v in values], d_values
 
     for i, leaf in zip(marked, watched([leaves[i] for i in marked]), strict=True):
         leaves[i] = leaf
