@@ -335,8 +335,9 @@ def test_second_derivatives_with_the_peaks():
 
 def test_reverse_over_a_derivative_says_what_to_use():
     """Reverse mode over a derivative of ``jmse`` with the peaks (``jax.grad`` of
-    ``jax.grad``) fails inside JAX while tracing; the error says to take second
-    derivatives forward over reverse (``jax.hessian``) instead of JAX's own message."""
+    ``jax.grad``) fails inside JAX; ``jmse``'s error says to take second derivatives
+    forward over reverse (``jax.hessian``) instead, also behind a ``jit`` between the two
+    derivatives, where JAX's own error came before."""
 
     def merit(u):
         return jj.jmse(jj.Seidel(w020=1.0, w131=0.5), 0.7, u, jj.MarkovSignal(1.0, 5.0),
@@ -357,9 +358,11 @@ def test_reverse_over_a_derivative_of_a_one_ray_plan_with_peaks_says_what_to_use
     ``jmse``, in the outer derivative's backward pass, with JAX's ``AssertionError``, and
     the process's memory then grew until it was killed: on the axis without ``jit`` (where
     the design takes its one-ray plan alone) and for a Zernike set of radial terms alone
-    (the program then holds the one-ray plans alone). ``jmse`` recognises such calls by
-    their tracers (``reverse_over_derivative``) and refuses them before tracing anything,
-    with the error that says what to use."""
+    (the program then holds the one-ray plans alone). Without ``jit`` ``jmse`` recognises
+    such calls by their tracers (``reverse_over_derivative``) and refuses them before
+    tracing anything; the traced program carries ``refuse_reverse_over``, which the outer
+    derivative meets before its backward pass. Both raise the error that says what to
+    use."""
     from jmse_jax._numerics import reverse_over_derivative
 
     seen = []
