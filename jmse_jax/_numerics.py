@@ -560,11 +560,14 @@ def refuse_reverse_over(tree, message):
     def watched(values):
         return values
 
-    @watched.defjvp
     def watched_jvp(primals, tangents):
+        # Symbolic zeros pass through as they are: the derivative rules downstream take
+        # gradients only in the operands that carry a tangent (``_live_tangents``).
         (values,), (d_values,) = primals, tangents
         sentinel = _reverse_sentinel(message)
-        return [sentinel.bind(v) for v in values], d_values
+        return [sentinel.bind(v) for v in values], list(d_values)
+
+    watched.defjvp(watched_jvp, symbolic_zeros=True)
 
     for i, leaf in zip(marked, watched([leaves[i] for i in marked]), strict=True):
         leaves[i] = leaf

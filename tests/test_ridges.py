@@ -426,6 +426,33 @@ def test_refuse_reverse_over_lets_every_other_derivative_through():
     assert float(forward) == pytest.approx(6 * x * y, rel=1e-15)
     third = jax.jacfwd(jax.jacfwd(jax.jit(jax.grad(f))))(x, y)
     assert float(third) == pytest.approx(6 * y, rel=1e-15)
+    # Operands without a tangent keep a symbolic zero, so that the derivative rules behind
+    # take gradients only in those that carry one (a first form instantiated zeros, and
+    # the tier switch's rule then formed the gradient in every operand).
+    from jax.custom_derivatives import SymbolicZero
+
+    seen = []
+
+    @jax.custom_jvp
+    def product(x, y):
+        return x * y
+
+    def product_jvp(primals, tangents):
+        seen.append(tuple(isinstance(t, SymbolicZero) for t in tangents))
+        (x, y), (dx, dy) = primals, tangents
+        dx, dy = (jnp.zeros_like(p) if isinstance(t, SymbolicZero) else t
+                  for p, t in ((x, dx), (y, dy)))
+        return x * y, dx * y + x * dy
+
+    product.defjvp(product_jvp, symbolic_zeros=True)
+
+    def g(x, y):
+        return product(*refuse_reverse_over((x, y), "no reverse over reverse"))
+
+    assert float(jax.grad(g)(x, y)) == y
+    assert float(jax.jvp(lambda x: g(x, y), (x,), (1.0,))[1]) == y
+    assert float(jax.jit(lambda y: jax.jvp(lambda y: g(x, y), (y,), (1.0,))[1])(y)) == x
+    assert seen == [(False, True), (False, True), (True, False)]
     grad_of = jax.grad(f)
     for form in (jax.grad(grad_of), jax.grad(jax.jit(grad_of)), jax.jit(jax.grad(grad_of)),
                  jax.grad(lambda x, y: jax.jvp(f, (x, y), (1.0, 0.0))[1]),
