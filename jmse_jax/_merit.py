@@ -2074,7 +2074,7 @@ def jmse(
             eager = _eager_derivative(static, inputs, primal, choice)
             if eager is not None:
                 return eager
-        if _batching_program(static, inputs[0]):
+        if _batching_program(static):
             # Reverse mode over a derivative of this program fails inside JAX, in places
             # (in the outer backward pass, with an AssertionError, for one-ray plans with
             # the peaks) and under forms (a jit between the two derivatives) that jmse
@@ -2099,13 +2099,14 @@ _REVERSE_OVER_DERIVATIVE = (
     "jax.grad(f) for one direction (docs/conventions.md, 'Second derivatives')")
 
 
-def _batching_program(static, aberrations) -> bool:
+def _batching_program(static) -> bool:
     """Whether the traced program of ``static`` holds a batching rule that reverse mode
     cannot linearize a second time (``with_batching_rule``'s ``custom_vmap``): the switch
     between several plans (the default's tiers, ``"high"``'s steep and balanced grids) or
     the closed-form peaks' branch (``batch_skipping_cond``). A single plan without the
-    peaks (``"fast"``, grids given) has neither, and reverse over reverse works there."""
-    plans = _base_plans(static, aberrations)
+    peaks (``"fast"``, grids given) has neither, and reverse over reverse works there.
+    The design does not change which plans there are (only the balanced plan's counts)."""
+    plans = _base_plans(static)
     return len(plans) > 1 or any(plan.get("peaks") for plan, _ in plans)
 
 
