@@ -7,7 +7,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 OUT ?= jmse_output
 
-.PHONY: run test test-slow install lint bench clean
+.PHONY: run test test-slow test-oldest install lint bench clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -30,6 +30,15 @@ test: $(BIN)/.installed
 test-slow: $(BIN)/.installed
 	$(BIN)/python -m pytest -q -n auto --dist loadfile -m slow
 
+# The test suite on the oldest dependency versions the package supports (constraints-oldest.txt,
+# the floors of pyproject.toml), in a virtual environment of its own.
+OLDEST ?= .venv-oldest
+test-oldest:
+	$(PYTHON) -m venv $(OLDEST)
+	$(OLDEST)/bin/pip install --quiet --upgrade pip
+	$(OLDEST)/bin/pip install --quiet -c constraints-oldest.txt -e ".[test]"
+	$(OLDEST)/bin/python -m pytest -q -n auto --dist loadfile
+
 lint: $(BIN)/.installed
 	$(BIN)/ruff check jmse_jax tests benchmarks notebooks
 
@@ -37,4 +46,4 @@ bench: $(BIN)/.installed
 	$(BIN)/python benchmarks/run_all.py
 
 clean:
-	rm -rf $(VENV) $(OUT) .pytest_cache
+	rm -rf $(VENV) $(OLDEST) $(OUT) .pytest_cache

@@ -6,6 +6,7 @@ computed only at the quadrature nodes (Berkner & Shroff, "Rethinking sampling to
 image quality estimation in Computational Imaging system design").
 """
 
+from . import _requirements  # noqa: F401  (first: checks the dependencies' versions)
 from ._aberrations import (
     AbstractAberrations as AbstractAberrations,
     Seidel as Seidel,

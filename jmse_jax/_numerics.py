@@ -510,10 +510,7 @@ def _reverse_sentinel(message):
     ``ValueError(message)`` when partial evaluation linearizes it (its tangent is then a
     ``JaxprTracer``: reverse mode, ``jax.linearize``) and otherwise passes the primal
     through itself again, so that forward mode of any order goes on as before."""
-    try:
-        from jax.extend.core import Primitive
-    except ImportError:  # jax before jax.extend.core had it
-        from jax.core import Primitive
+    from jax.extend.core import Primitive
     from jax.interpreters import ad, batching, mlir
 
     sentinel = Primitive("jmse_reverse_over_derivative")
