@@ -730,8 +730,8 @@ def test_vmap_over_u_alone_runs_design_by_design_on_cpu(monkeypatch):
 @pytest.mark.slow
 def test_value_and_grad_under_vmap_runs_design_by_design_on_cpu(monkeypatch):
     """``vmap`` of ``value_and_grad`` on CPU, as the test above: each design gets bit for bit
-    the value and gradient it gets alone (whose value the value's batch gives too), and the
-    design whose terms cancel its balanced grid's (the oracle: that grid fixed)."""
+    the value and gradient it gets alone (and the value's batch that value, to 1e-14), and
+    the design whose terms cancel its balanced grid's (the oracle: that grid fixed)."""
     batch, fields = _cpu_vmap_batch(monkeypatch)
     vag = jax.value_and_grad(_cpu_merit, argnums=(0, 1))
     values = jax.jit(jax.vmap(_cpu_merit))(batch, fields)
@@ -739,7 +739,11 @@ def test_value_and_grad_under_vmap_runs_design_by_design_on_cpu(monkeypatch):
     single_vag = jax.jit(vag)
     for i, (ab, f, _, _) in enumerate(CPU_VMAP_DESIGNS):
         value, (grad, field_grad) = single_vag(jj.Seidel(**_coefficients(ab)), jnp.float64(f))
-        assert float(values[i]) == float(values_g[i]) == float(value)
+        assert float(values_g[i]) == float(value)
+        # The value-only program is another program, whose sums XLA may order otherwise: with
+        # jax 0.7.2 it differed from the gradient's value in the last bits (5.6190050536372724e-05
+        # against 5.619005053637274e-05; jax 0.10.2 gives both to the bit).
+        assert float(values[i]) == pytest.approx(float(value), rel=1e-14)
         assert float(field_grads[i]) == float(field_grad)
         for name in ("w020", "w040", "w131", "w222", "w220"):
             assert float(getattr(grads, name)[i]) == float(getattr(grad, name))
