@@ -68,16 +68,15 @@ def check(installed: dict[str, str | None] | None = None) -> None:
                 installed[name] = importlib.metadata.version(name)
             except importlib.metadata.PackageNotFoundError:
                 installed[name] = None
-    too_old = [f"{name} {found} (needs >= {MINIMUM_VERSIONS[name]})"
-               for name, found in installed.items()
+    too_old = {name: found for name, found in installed.items()
                if found is not None and name in MINIMUM_VERSIONS
-               and release(found) < release(MINIMUM_VERSIONS[name])]
+               and release(found) < release(MINIMUM_VERSIONS[name])}
     if too_old:
-        raise ImportError(
-            "jmse_jax needs newer versions of: " + ", ".join(too_old)
-            + ". Upgrade them, e.g. pip install --upgrade "
-            + " ".join(f'"{entry.split()[0]}>={MINIMUM_VERSIONS[entry.split()[0]]}"'
-                       for entry in too_old) + ".")
+        found = ", ".join(f"{name} {version} (needs >= {MINIMUM_VERSIONS[name]})"
+                          for name, version in too_old.items())
+        upgrade = " ".join(f'"{name}>={MINIMUM_VERSIONS[name]}"' for name in too_old)
+        raise ImportError(f"jmse_jax needs newer versions of: {found}. Upgrade them, e.g. "
+                          f"pip install --upgrade {upgrade}.")
 
 
 check()
