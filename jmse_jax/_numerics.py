@@ -508,7 +508,8 @@ def _reverse_sentinel(message):
     """The identity primitive of ``refuse_reverse_over`` for ``message`` (one per message,
     so that no parameter clutters a printed jaxpr): its derivative rule raises
     ``ValueError(message)`` when partial evaluation linearizes it (its tangent is then a
-    ``JaxprTracer``: reverse mode, ``jax.linearize``) and otherwise passes the primal
+    ``JaxprTracer``: reverse mode, ``jax.linearize``; JAX's direct linearization, the
+    default since jax 0.7, the floor of ``_requirements``) and otherwise passes the primal
     through itself again, so that forward mode of any order goes on as before."""
     from jax.extend.core import Primitive
     from jax.interpreters import ad, batching, mlir

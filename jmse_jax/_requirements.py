@@ -24,6 +24,7 @@ The floors are the versions that the whole test suite passed with (``make test-o
 from __future__ import annotations
 
 import importlib.metadata
+import re
 
 #: Distribution name -> oldest version tested (``make test-oldest`` installs these).
 MINIMUM_VERSIONS = {
@@ -40,19 +41,8 @@ MINIMUM_VERSIONS = {
 def release(version: str) -> tuple[int, ...]:
     """The leading numeric release of a version string: ``"0.10.3.dev20261201"`` ->
     ``(0, 10, 3)``, ``"0.7.2rc1"`` -> ``(0, 7, 2)``, ``"2.0"`` -> ``(2, 0)``."""
-    parts = []
-    for piece in version.split("."):
-        digits = ""
-        for char in piece:
-            if not char.isdigit():
-                break
-            digits += char
-        if not digits:
-            break
-        parts.append(int(digits))
-        if len(digits) < len(piece):
-            break
-    return tuple(parts)
+    leading = re.match(r"\d+(?:\.\d+)*", version)
+    return tuple(int(part) for part in leading.group().split(".")) if leading else ()
 
 
 def check(installed: dict[str, str | None] | None = None) -> None:
