@@ -10,11 +10,14 @@ from __future__ import annotations
 import abc
 import functools
 import math
+from collections.abc import Callable
+from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from ._numerics import check_count, check_finite_tree, check_range, common_dtype
 
@@ -137,13 +140,13 @@ class Seidel(AbstractAberrations):
     -1.1922
     """
 
-    w020: jax.Array | float = 0.0
-    w040: jax.Array | float = 0.0
-    w131: jax.Array | float = 0.0
-    w222: jax.Array | float = 0.0
-    w220: jax.Array | float = 0.0
-    w311: jax.Array | float = 0.0
-    w111: jax.Array | float = 0.0
+    w020: ArrayLike = 0.0
+    w040: ArrayLike = 0.0
+    w131: ArrayLike = 0.0
+    w222: ArrayLike = 0.0
+    w220: ArrayLike = 0.0
+    w311: ArrayLike = 0.0
+    w111: ArrayLike = 0.0
 
     def __call__(self, x, y, field):
         rho2 = x * x + y * y
@@ -461,11 +464,11 @@ class Zernike(AbstractAberrations):
         c = self.coefficients[np.asarray(low, dtype=int)]
         groups = {key: (jnp.dot(w[0], c), jnp.dot(w[1], c))
                   for key, w in _seidel_like_groups(tuple(self.noll[i] for i in low))}
-        defocus = groups.pop((0, 2), None)
+        defocus: tuple[Any, Any] | None = groups.pop((0, 2), None)
         astigmatism = groups.pop((2, 2), None)
         groups.pop((0, 0), None)  # piston
         groups.pop((1, 1), None)  # tilt (Z2, Z3 and the linear parts of coma)
-        terms = []
+        terms: list[Callable[..., Any]] = []
         if astigmatism is not None:
             a, b = astigmatism
             amplitude = jnp.hypot(a, b)
@@ -489,7 +492,7 @@ def _seidel_like_groups(noll: tuple[int, ...]):
     """Host constants of ``Zernike.seidel_like_terms``: for each ``(|m|, P)`` the weights that
     take the coefficients to the ``cos`` (row 0) and ``sin`` (row 1) amplitudes of
     ``rho^P e^{i |m| theta}``."""
-    groups = {}
+    groups: dict[tuple[int, int], np.ndarray] = {}
     for i, j in enumerate(noll):
         n, m = noll_to_nm(j)
         norm = math.sqrt(n + 1) if m == 0 else math.sqrt(2 * (n + 1))
@@ -505,7 +508,7 @@ def _grouped_weights(noll: tuple[int, ...]):
     the weights ``(K, 2, len(noll))`` that take the coefficients to the ``cos`` and ``sin``
     amplitudes of ``rho^(m + 2k) e^{i m theta}``, ``k < K``, and which of the two parts
     (0: cos, 1: sin) is nonzero."""
-    by_m = {}
+    by_m: dict[int, dict[int, np.ndarray]] = {}
     for (m, power), weights in _seidel_like_groups(noll):
         by_m.setdefault(m, {})[(power - m) // 2] = weights
     out = []

@@ -15,6 +15,7 @@ import re
 import time
 import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -405,8 +406,8 @@ _TOKEN = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
 
 def _parse(path: str, lens: Lens):
     """Tokens of ``path`` and the trailing array index; ValueError when it names no float."""
-    node = lens
-    tokens = []
+    node: Any = lens
+    tokens: list[tuple[str, int | None]] = []
     trailing = None
     parts = path.split(".")
     for position, part in enumerate(parts):
@@ -756,7 +757,8 @@ def optimise(
             if name not in variables:
                 raise ValueError(f"bounds names {name!r}, which is not among variables "
                                  f"{variables}")
-        lower, upper = [], []
+        lower: Any = []
+        upper: Any = []
         for i, (name, p) in enumerate(zip(variables, parsed, strict=True)):
             low, high = _check_bound(name, bounds.get(name, (None, None)))
             start = float(_get(lens, p))
@@ -782,7 +784,8 @@ def optimise(
         jax.block_until_ready(solution)
         y, iterations = solution.value, int(solution.stats["num_steps"])
         result = "converged" if bool(solution.result == optx.RESULTS.successful) else (
-            "not converged: " + optx.RESULTS[solution.result])
+            # equinox's enumeration metaclass maps a result to its message (mypy cannot see it)
+            "not converged: " + optx.RESULTS[solution.result])  # type: ignore[misc]
         solver_name = type(opt).__name__
     wall_time = time.perf_counter() - start_time
 

@@ -13,6 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from ._numerics import abs2, check_range, safe_norm
 
@@ -93,8 +94,8 @@ class MarkovSignal(AbstractSignal):
     correlation_length : float > 0 [``lambda N`` units, the inverse of the frequency unit]
     """
 
-    variance: jax.Array | float = 1.0
-    correlation_length: jax.Array | float = 5.0
+    variance: ArrayLike = 1.0
+    correlation_length: ArrayLike = 5.0
 
     def __check_init__(self):
         check_range("variance", self.variance, 0.0, None, low_inclusive=False)
@@ -123,9 +124,9 @@ class PowerLawSignal(AbstractSignal):
     knee : float > 0 [cutoff units] (``nu_0``; keeps ``S_x(0)`` finite)
     """
 
-    amplitude: jax.Array | float = 1.0
-    exponent: jax.Array | float = 2.0
-    knee: jax.Array | float = 0.01
+    amplitude: ArrayLike = 1.0
+    exponent: ArrayLike = 2.0
+    knee: ArrayLike = 0.01
 
     def __check_init__(self):
         check_range("amplitude", self.amplitude, 0.0, None, low_inclusive=False)
@@ -145,7 +146,7 @@ class PowerLawSignal(AbstractSignal):
 class WhiteSignal(AbstractSignal):
     """Flat signal spectrum ``S_x = level``."""
 
-    level: jax.Array | float = 1.0
+    level: ArrayLike = 1.0
 
     def __check_init__(self):
         check_range("level", self.level, 0.0, None, low_inclusive=False)
@@ -183,7 +184,7 @@ class WhiteNoise(AbstractNoise):
     variance : float > 0 [signal units squared, per unit area of the frequency plane]
     """
 
-    variance: jax.Array | float = 1e-3
+    variance: ArrayLike = 1e-3
 
     def __check_init__(self):
         check_range("noise variance", self.variance, 0.0, None, low_inclusive=False)

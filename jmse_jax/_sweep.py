@@ -27,6 +27,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -118,10 +119,10 @@ class SweepResult:
         memory, JAX version, and the user's own ``metadata``.
     """
 
-    inputs: object
-    value: object
-    grad: object
-    aux: object
+    inputs: Any
+    value: Any
+    grad: Any
+    aux: Any
     status: np.ndarray
     metadata: dict
 
@@ -154,7 +155,7 @@ class SweepResult:
         path = Path(path)
         if path.suffix != ".npz":
             path = path.with_name(path.name + ".npz")
-        arrays: dict[str, np.ndarray] = {}
+        arrays: dict[str, Any] = {}
         trees = {}
         for group in ("inputs", "value", "grad", "aux"):
             trees[group] = _encode_tree(getattr(self, group), group, arrays)
@@ -246,7 +247,7 @@ def _encode_tree(tree, name: str, arrays: dict) -> dict:
         return {"node": "dict", "keys": keys,
                 "children": [_encode_tree(tree[k], f"{name}.{k}", arrays) for k in keys]}
     if isinstance(tree, tuple) and hasattr(tree, "_fields"):
-        cls = type(tree)
+        cls: type = type(tree)
         return {"node": "namedtuple", "class": f"{cls.__module__}:{cls.__qualname__}",
                 "fields": list(tree._fields),
                 "children": [_encode_tree(v, f"{name}.{f}", arrays)
@@ -286,6 +287,7 @@ def _import_class(path: str, kind: str):
     be a class of the expected kind (a crafted header could otherwise name any callable).
     """
     module_name, _, qualname = path.partition(":")
+    obj: Any
     if module_name == "jmse_jax" or module_name.startswith("jmse_jax."):
         obj = importlib.import_module(module_name)
     elif module_name in sys.modules:

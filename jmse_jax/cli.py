@@ -18,6 +18,7 @@ import subprocess
 import sys
 import tempfile
 import warnings
+from typing import Any
 
 from ._merit import U_MAX
 from ._numerics import check_range
@@ -195,7 +196,7 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str) -> list:
 
 def eval_inputs(args) -> dict:
     """Merge defaults <- ``--json`` file <- explicit flags; return the validated settings."""
-    settings = dict(EVAL_DEFAULTS, **{k: 0.0 for k in COEFFICIENTS})
+    settings: dict[str, Any] = dict(EVAL_DEFAULTS, **{k: 0.0 for k in COEFFICIENTS})
     if args.preset_point == "fig1":
         settings.update(FIG1)
     if args.json:

@@ -15,6 +15,8 @@ up to about 6 at field 0.95):
 
 from __future__ import annotations
 
+from typing import Any
+
 from ._glass import FRAUNHOFER_D, N_BK7
 from ._paraxial import solve_last_curvature
 from ._surfaces import Lens, Singlet
@@ -22,7 +24,7 @@ from ._surfaces import Lens, Singlet
 __all__ = ["PAPER_SINGLET", "paper_singlet"]
 
 #: The fixed parameters of the paper's singlet space (see the module docstring).
-PAPER_SINGLET = dict(
+PAPER_SINGLET: dict[str, Any] = dict(
     f_number=4.6,
     focal_length=9.0,
     thickness=1.5,

@@ -9,8 +9,8 @@ from __future__ import annotations
 import abc
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from .._numerics import check_range
 
@@ -48,7 +48,7 @@ class ConstantGlass(AbstractGlass):
     n : float >= 1 [dimensionless]
     """
 
-    n: jax.Array | float = 1.0
+    n: ArrayLike = 1.0
 
     def __check_init__(self):
         check_range("glass index n", self.n, 1.0, 4.0)
@@ -67,9 +67,9 @@ class CauchyGlass(AbstractGlass):
     c : float [µm⁴], default 0
     """
 
-    a: jax.Array | float
-    b: jax.Array | float
-    c: jax.Array | float = 0.0
+    a: ArrayLike
+    b: ArrayLike
+    c: ArrayLike = 0.0
 
     def __check_init__(self):
         check_range("Cauchy a", self.a, 1.0, 4.0)
@@ -103,8 +103,8 @@ class AbbeGlass(AbstractGlass):
     1.5168
     """
 
-    nd: jax.Array | float = 1.5168
-    vd: jax.Array | float = 64.17
+    nd: ArrayLike = 1.5168
+    vd: ArrayLike = 64.17
 
     def __check_init__(self):
         check_range("glass nd", self.nd, 1.0, 4.0)

@@ -80,7 +80,8 @@ def _sums_from_trace(lens: Lens, trace: ParaxialTrace) -> SeidelSums:
     s5 = s5 + excess * y * y_bar**3
     per_surface = jnp.stack([s1, s2, s3, s4, s5])
     totals = jnp.sum(per_surface, axis=1)
-    return SeidelSums(*totals, per_surface=per_surface)
+    return SeidelSums(totals[0], totals[1], totals[2], totals[3], totals[4],
+                      per_surface=per_surface)
 
 
 def seidel_sums(lens: Lens, wavelength=None) -> SeidelSums:
