@@ -40,7 +40,7 @@ test-oldest:
 	$(OLDEST)/bin/python -m pytest -q -n auto --dist loadfile
 
 lint: $(BIN)/.installed
-	$(BIN)/ruff check jmse_jax tests benchmarks notebooks
+	$(BIN)/ruff check jmse_jax tests benchmarks notebooks docs
 
 bench: $(BIN)/.installed
 	$(BIN)/python benchmarks/run_all.py

@@ -51,6 +51,7 @@ __all__ = [
     "radial_panel_sizes",
 ]
 
+#: The names ``frequency_quadrature`` (and ``jmse``'s ``quadrature``) accepts.
 QUADRATURES = ("polar", "gauss", "gauss_polar", "trapezoid", "rectangle")
 
 

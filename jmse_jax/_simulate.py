@@ -584,6 +584,7 @@ class MonteCarloResult(NamedTuple):
 
     @property
     def trials(self) -> int:
+        """The number of Monte-Carlo trials (scenes) behind ``mse``."""
         return int(self.per_trial.shape[0])
 
 
