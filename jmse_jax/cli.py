@@ -30,9 +30,13 @@ COEFFICIENT_NAMES = {"w020": "defocus", "w040": "spherical", "w131": "coma",
                      "w222": "astigmatism", "w220": "field curvature", "w311": "distortion",
                      "w111": "tilt"}
 PRESET_NAMES = ("fast", "default", "high")
-EVAL_KEYS = COEFFICIENTS + ("field", "u", "noise", "signal", "preset", "nu")
+EVAL_KEYS = COEFFICIENTS + ("zernike", "field", "u", "noise", "signal", "preset", "nu")
 EVAL_DEFAULTS = dict(field=FIG1_FIELD, u=FIG1_U, noise=1e-3, signal="markov:1,5",
-                     preset="default", nu="0.05,0.1,0.2")
+                     preset="default", nu="0.05,0.1,0.2", zernike=None)
+ZERNIKE_HELP = ("Zernike coefficients in place of Seidel's: comma-separated NOLL:WAVES pairs, "
+                "e.g. 4:0.5,11:-0.2 (Noll index >= 1; each coefficient is its term's RMS over "
+                "the pupil in waves; polar angle from +y, so the cosine terms are even in x, "
+                "docs/conventions.md; one field point, so --field is not used)")
 UNITS = ("Units: Seidel coefficients in waves; spatial frequencies nu in units of the optical "
          "cutoff 1/(lambda N); u = sensor Nyquist / optical cutoff = lambda N / (2 pixel pitch) "
          "in (0, 1.5]; field = fractional field height in [0, 1]; signal and noise spectra in "
@@ -102,6 +106,47 @@ def parse_signal(text: str):
             raise UsageError(f"--signal powerlaw knee NU0 must be positive, got {text!r}")
         return jj.PowerLawSignal(values[0], values[1], values[2])
     return jj.WhiteSignal(values[0])
+
+
+def parse_zernike(value, name: str = "zernike") -> dict[int, float]:
+    """``"4:0.5,11:-0.2"`` (the flag) or ``{"4": 0.5, "11": -0.2}`` (the JSON key) ->
+    ``{Noll index: coefficient [waves RMS]}`` in rising index."""
+    if isinstance(value, str):
+        pairs = []
+        for piece in value.split(","):
+            index, colon, coefficient = piece.partition(":")
+            if not colon:
+                raise UsageError(f"{name} must be NOLL:WAVES pairs separated by commas "
+                                 f"(e.g. 4:0.5,11:-0.2), got {value!r}")
+            pairs.append((index.strip(), coefficient.strip()))
+    elif isinstance(value, dict):
+        pairs = list(value.items())
+    else:
+        raise UsageError(f"{name} must be an object of Noll index: waves (e.g. "
+                         f'{{"4": 0.5, "11": -0.2}}), got {json.dumps(value)}')
+    if not pairs:
+        raise UsageError(f"{name} must name at least one Zernike term, got none")
+    terms: dict[int, float] = {}
+    for index, coefficient in pairs:
+        try:
+            j = int(index)
+        except (TypeError, ValueError):
+            j = 0
+        if isinstance(index, bool) or str(j) != str(index).strip() or j < 1:
+            raise UsageError(f"{name}: a Noll index must be an integer >= 1, got {index!r}")
+        if j in terms:
+            raise UsageError(f"{name}: Noll index {j} is given twice")
+        try:
+            if isinstance(coefficient, bool):
+                raise TypeError
+            terms[j] = float(coefficient)
+        except (TypeError, ValueError):
+            raise UsageError(f"{name}: the coefficient of Z{j} must be a number [waves], "
+                             f"got {coefficient!r}") from None
+        if not math.isfinite(terms[j]):
+            raise UsageError(f"{name}: the coefficient of Z{j} must be finite, "
+                             f"got {coefficient!r}")
+    return dict(sorted(terms.items()))
 
 
 def _positive(name, value) -> float:
@@ -236,6 +281,13 @@ def eval_inputs(args) -> dict:
             raise UsageError(f"{key} must be a number, got {settings[key]!r}") from None
         if not math.isfinite(settings[key]):
             raise UsageError(f"{key} must be finite, got {settings[key]!r}")
+    if settings["zernike"] is not None:
+        settings["zernike"] = parse_zernike(settings["zernike"])
+        seidel = {k: settings[k] for k in COEFFICIENTS if settings[k] != 0.0}
+        if seidel:
+            given = ", ".join(f"{k} = {v:g}" for k, v in seidel.items())
+            raise UsageError(f"give Seidel coefficients or --zernike, not both (got {given} "
+                             f"with --zernike)")
     if settings["preset"] not in PRESET_NAMES:
         raise UsageError(f"preset must be one of {', '.join(PRESET_NAMES)}, "
                          f"got {settings['preset']!r}")
@@ -262,14 +314,20 @@ def eval_design(settings: dict) -> tuple:
     import jmse_jax as jj
     from jmse_jax._merit import _validate
 
-    ab = jj.Seidel(**{k: settings[k] for k in COEFFICIENTS})
+    ab: jj.AbstractAberrations
+    if settings["zernike"] is not None:
+        terms = settings["zernike"]
+        ab = jj.Zernike(list(terms.values()), noll=tuple(terms))
+    else:
+        ab = jj.Seidel(**{k: settings[k] for k in COEFFICIENTS})
     signal, noise = parse_signal(settings["signal"]), jj.WhiteNoise(settings["noise"])
     _validate(ab, settings["field"], settings["u"], signal, noise)
     return ab, settings["field"], settings["u"], signal, noise
 
 
 def evaluate(settings: dict) -> dict:
-    """JMSE, its gradient w.r.t. the Seidel coefficients, and the OTF for ``settings``."""
+    """JMSE, its gradient w.r.t. the coefficients (Seidel's, or the Zernike terms'), and the
+    OTF for ``settings``."""
     import jax
     import numpy as np
 
@@ -277,18 +335,25 @@ def evaluate(settings: dict) -> dict:
 
     ab, field, u, signal, noise = eval_design(settings)
     preset = settings["preset"]
-    # One compiled program (kept by the compilation cache) serves every field, u and spectrum.
-    merit = jax.jit(jax.value_and_grad(jj.jmse), static_argnames="preset")
-    value, grad = merit(ab, field, u, signal, noise, preset=preset)
+    # Not jitted: a derivative taken outside jit sees the concrete design, so it compiles only
+    # the grid that design takes (at the Fig. 1 point, 7.6 s for the whole command against
+    # 41.8 s for the jitted program holding every tier, 2-core AMD EPYC, no compile cache).
+    value, grad = jax.value_and_grad(jj.jmse)(ab, field, u, signal, noise, preset=preset)
     nu = np.asarray(settings["nu"], dtype=float)
     zeros = np.zeros_like(nu)
     h_x = np.asarray(jj.otf(ab, nu, zeros, field))
     h_y = np.asarray(jj.otf(ab, zeros, nu, field))
+    if isinstance(ab, jj.Zernike):
+        inputs = {"zernike": {str(j): c for j, c in settings["zernike"].items()}}
+        gradient = {f"Z{j}": float(g) for j, g in zip(ab.noll, grad.coefficients, strict=True)}
+    else:
+        inputs = {k: settings[k] for k in COEFFICIENTS}
+        gradient = {k: float(getattr(grad, k)) for k in COEFFICIENTS}
     return dict(
-        inputs={k: settings[k] for k in COEFFICIENTS + ("field", "u", "noise", "signal",
-                                                          "preset")},
+        inputs=dict(inputs, **{k: settings[k] for k in ("field", "u", "noise", "signal",
+                                                         "preset")}),
         jmse=float(value),
-        gradient={k: float(getattr(grad, k)) for k in COEFFICIENTS},
+        gradient=gradient,
         otf=[dict(nu=float(n), nu_x=dict(re=float(a.real), im=float(a.imag), mtf=float(abs(a))),
                   nu_y=dict(re=float(b.real), im=float(b.imag), mtf=float(abs(b))))
              for n, a, b in zip(nu, h_x, h_y, strict=True)],
@@ -302,18 +367,34 @@ def _cmd_eval(args) -> int:
     settings = eval_inputs(args)
     ab, field, u, signal, noise = eval_design(settings)
     _check_out(args.out_json)
-    # The jitted run below cannot give jmse's warnings for a concrete design: give them here.
-    warn_like_jmse(jax.tree_util.tree_map(lambda x: np.reshape(x, 1), ab), np.reshape(field, 1),
-                   np.reshape(u, 1), signal, noise, settings["preset"])
-    result = evaluate(settings)
+    # jmse's warnings before the computation (seconds of compiling), in sweep's form.
+    printed = warn_like_jmse(jax.tree_util.tree_map(lambda x: np.asarray(x)[None], ab),
+                             np.reshape(field, 1), np.reshape(u, 1), signal, noise,
+                             settings["preset"])
+    # The concrete call gives the same warnings again as Python warnings: print only others.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = evaluate(settings)
+    for w in caught:
+        text = " ".join(str(w.message).split())
+        if text not in printed:
+            print(f"jmse-jax: warning: {text}", file=sys.stderr, flush=True)
     inp = result["inputs"]
     print(f"JMSE (Wiener-restoration MSE), preset {inp['preset']}: field {inp['field']:g}, "
           f"u = {inp['u']:g} (Nyquist/cutoff), signal {inp['signal']}, "
           f"noise {inp['noise']:g}")
-    print(f"{'coefficient':<26}{'value [waves]':>15}{'dJMSE/dw [1/wave]':>20}")
-    for k in COEFFICIENTS:
-        print(f"{k + ' (' + COEFFICIENT_NAMES[k] + ')':<26}{inp[k]:>15.6g}"
-              f"{result['gradient'][k]:>20.6e}")
+    if "zernike" in inp:
+        import jmse_jax as jj
+
+        print(f"{'Zernike term (n, m)':<26}{'value [waves]':>15}{'dJMSE/dc [1/wave]':>20}")
+        for j, c in settings["zernike"].items():
+            n, m = jj.noll_to_nm(j)
+            print(f"{f'Z{j} ({n}, {m})':<26}{c:>15.6g}{result['gradient'][f'Z{j}']:>20.6e}")
+    else:
+        print(f"{'coefficient':<26}{'value [waves]':>15}{'dJMSE/dw [1/wave]':>20}")
+        for k in COEFFICIENTS:
+            print(f"{k + ' (' + COEFFICIENT_NAMES[k] + ')':<26}{inp[k]:>15.6g}"
+                  f"{result['gradient'][k]:>20.6e}")
     print(f"JMSE = {result['jmse']:.10e}")
     print("OTF H (nu in cutoff units 1/(lambda N)):")
     print(f"{'nu':>8}{'H(nu, 0)':>28}{'|H(nu,0)|':>12}{'H(0, nu)':>28}{'|H(0,nu)|':>12}")
@@ -623,14 +704,16 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     ev = sub.add_parser(
-        "eval", help="JMSE, its gradient and the OTF for Seidel coefficients [waves]",
+        "eval", help="JMSE, its gradient and the OTF for Seidel or Zernike coefficients [waves]",
         description="Evaluate the JMSE, its gradient with respect to the Seidel coefficients "
-        "and the OTF at a few frequencies. Values come from the defaults, then --json FILE "
-        "(an object with the same keys: w020 ... w111, field, u, noise, signal, preset, nu), "
+        "(or the Zernike terms of --zernike) and the OTF at a few frequencies. Values come "
+        "from the defaults, then --json FILE (an object with the same keys: w020 ... w111, "
+        "zernike as an object such as {\"4\": 0.5}, field, u, noise, signal, preset, nu), "
         "then the flags. " + UNITS)
     _add_coefficients(ev, what="(default 0, or the Fig. 1 value with --point fig1)")
     ev.add_argument("--point", dest="preset_point", choices=("zero", "fig1"), default="zero",
                     help="starting coefficients: all zero, or the paper's Fig. 1 point")
+    ev.add_argument("--zernike", metavar="NOLL:WAVES,...", help=ZERNIKE_HELP)
     ev.add_argument("--field", type=float, help="fractional field height in [0, 1] "
                     f"(default {FIG1_FIELD})")
     ev.add_argument("--u", type=float, help="sensor Nyquist / optical cutoff, in (0, 1.5] "

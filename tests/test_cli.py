@@ -10,6 +10,7 @@ import subprocess
 import sys
 import types
 
+import jax
 import numpy as np
 import pytest
 from conftest import FIG1_COEFFICIENTS
@@ -132,6 +133,39 @@ def test_eval_json_with_unknown_key_exits_2(capsys, tmp_path):
     path.write_text(json.dumps({"w020": 1.0, "focus": 2.0}))
     status, _, err = run_cli(capsys, "eval", "--json", str(path))
     assert status == 2 and "focus" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("argv, words", [
+    (("--zernike", "4"), ("zernike must be NOLL:WAVES pairs", "'4'")),
+    (("--zernike", "0:1"), ("Noll index must be an integer >= 1", "'0'")),
+    (("--zernike", "4.5:1"), ("Noll index must be an integer >= 1", "'4.5'")),
+    (("--zernike", "4:1,11:2,4:3"), ("Noll index 4 is given twice",)),
+    (("--zernike", "4:abc"), ("coefficient of Z4 must be a number", "'abc'")),
+    (("--zernike", "4:nan"), ("coefficient of Z4 must be finite",)),
+    (("--zernike", "4:0.5", "--point", "fig1"), ("not both", "w020 = -2.75")),
+    (("--zernike", "4:0.5", "--w131", "1"), ("not both", "w131 = 1")),
+])
+def test_eval_zernike_flag_refuses_bad_terms(capsys, no_computation, argv, words):
+    status, _, err = run_cli(capsys, "eval", *argv)
+    assert_one_line_error(status, err, *words)
+
+
+@pytest.mark.parametrize("zernike, words", [
+    ({"4": True}, ("coefficient of Z4 must be a number", "True")),
+    ({"x": 1.0}, ("Noll index must be an integer >= 1", "'x'")),
+    ({}, ("at least one Zernike term",)),
+    ([0.5, 0.2], ("object of Noll index: waves", "[0.5, 0.2]")),
+])
+def test_eval_zernike_json_refuses_bad_terms(capsys, tmp_path, no_computation, zernike, words):
+    path = tmp_path / "in.json"
+    path.write_text(json.dumps({"zernike": zernike}))
+    status, _, err = run_cli(capsys, "eval", "--json", str(path))
+    assert_one_line_error(status, err, *words)
+
+
+def test_eval_zernike_terms_are_read_in_rising_noll_order():
+    assert cli.parse_zernike("11:-0.2, 4:0.5") == {4: 0.5, 11: -0.2}
+    assert cli.parse_zernike({"8": 1, "4": 0.25}) == {4: 0.25, 8: 1.0}
 
 
 def test_bench_without_benchmarks_folder_is_a_clear_error(capsys, monkeypatch, tmp_path):
@@ -434,6 +468,29 @@ def test_eval_json_input_and_flag_override(capsys, tmp_path):
     expected = float(jj.jmse(ab, 0.5, 0.3, jj.PowerLawSignal(1.0, 2.0, 0.05),
                              jj.WhiteNoise(1e-2), preset="fast"))
     assert result["jmse"] == pytest.approx(expected, rel=1e-12)
+
+
+def test_eval_zernike_matches_library(capsys, tmp_path):
+    # Defocus, coma along y and spherical aberration: Seidel's shapes, written as Zernike
+    # terms in rising order of Noll index from a flag given out of order.
+    out_json = tmp_path / "eval.json"
+    status, out, err = run_cli(capsys, "eval", "--zernike", "11:0.2,4:0.3,7:-0.25",
+                               "--u", "0.3", "--preset", "fast", "--nu", "0.1",
+                               "--out-json", str(out_json))
+    assert status == 0 and err == ""
+    result = json.loads(out_json.read_text())
+    ab = jj.Zernike([0.3, -0.25, 0.2], noll=(4, 7, 11))
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    value, grad = jax.value_and_grad(jj.jmse)(ab, 0.95, 0.3, signal, noise, preset="fast")
+    assert result["inputs"]["zernike"] == {"4": 0.3, "7": -0.25, "11": 0.2}
+    assert result["jmse"] == pytest.approx(float(value), rel=1e-12)
+    assert f"{float(value):.10e}" in out and "Z7 (3, -1)" in out
+    assert list(result["gradient"]) == ["Z4", "Z7", "Z11"]
+    np.testing.assert_allclose([result["gradient"][k] for k in ("Z4", "Z7", "Z11")],
+                               np.asarray(grad.coefficients), rtol=1e-10)
+    h = complex(jj.otf(ab, 0.0, 0.1, 0.95))
+    assert result["otf"][0]["nu_y"]["re"] == pytest.approx(h.real, abs=1e-12)
+    assert result["otf"][0]["nu_y"]["im"] == pytest.approx(h.imag, abs=1e-12)
 
 
 # --------------------------------------------------------------------------------------
