@@ -183,3 +183,23 @@ def test_zernike_seidel_like_terms_sum_to_the_wavefront_less_piston_and_tilt():
         assert bool(jj.Zernike([0.5, 1e-5], noll=(4, j)).beyond_seidel_degree())
         assert not bool(jj.Zernike([0.5, 1e-13], noll=(4, j)).beyond_seidel_degree())
     assert not bool(jj.Zernike([0.5, 1.0, 1.0], noll=(4, 12, 13)).beyond_seidel_degree())
+
+
+def test_zernike_coefficients_of_programs_whose_angle_runs_from_x_give_the_same_merit():
+    """docs/conventions.md: with the polar angle from +x, the same Noll coefficients describe
+    this package's wavefront reflected across x = y; the square band and isotropic spectra
+    map onto themselves under that reflection, so the JMSE is the same, and the OTF's axes
+    swap."""
+    noll = (4, 5, 6, 7, 8, 9, 10, 11)
+    ab = jj.Zernike([0.3, 0.2, -0.15, 0.25, -0.1, 0.12, -0.08, 0.2], noll=noll)
+    grid = jj.PolarGrid(6, 40)
+    theirs = np.asarray(jj.wavefront(ab, grid.y, grid.x))  # W(y, x): theta from +x
+    reflected = jj.zernike_fit(theirs, grid, noll=noll)
+    # Their cosine and sine partners trade places (Z5 <-> Z6 with a sign, Z7 <-> Z8, ...).
+    np.testing.assert_allclose(reflected.coefficients,
+                               [0.3, 0.2, 0.15, -0.1, 0.25, 0.08, -0.12, 0.2], atol=1e-12)
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    assert float(jj.jmse(reflected, 0.0, 0.3, signal, noise, preset="fast")) == pytest.approx(
+        float(jj.jmse(ab, 0.0, 0.3, signal, noise, preset="fast")), rel=1e-12)
+    assert complex(jj.otf(reflected, 0.05, 0.1)) == pytest.approx(
+        complex(jj.otf(ab, 0.1, 0.05)), abs=1e-13)
