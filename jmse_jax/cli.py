@@ -488,13 +488,21 @@ SWEEP_AXES = COEFFICIENTS + ("field", "u")
 SWEEP_FILES = ("sweep.npz", "sweep.json", "sweep_summary.json")
 
 
+def zernike_axis(name: str) -> int | None:
+    """The Noll index of an axis named ``Z<j>`` (``j >= 1``), else None."""
+    if len(name) > 1 and name[0] == "Z" and name[1:].isdigit() and name[1] != "0":
+        return int(name[1:])
+    return None
+
+
 def axis_spec(text: str) -> tuple[str, float, float, int]:
     """``NAME=MIN,MAX,N`` -> ``(name, min, max, n)``, checked; no array is made."""
     name, sep, rest = str(text).partition("=")
     name = name.strip()
-    if not sep or name not in SWEEP_AXES:
+    if not sep or (name not in SWEEP_AXES and zernike_axis(name) is None):
         raise UsageError(f"--axis must be NAME=MIN,MAX,N with NAME one of "
-                         f"{', '.join(SWEEP_AXES)}, got {text!r}")
+                         f"{', '.join(SWEEP_AXES)} or Z<j> (a Zernike term, Noll index "
+                         f"j >= 1), got {text!r}")
     values = _floats(rest, f"--axis {name}")
     if len(values) != 3 or values[2] != int(values[2]) or values[2] < 1:
         raise UsageError(f"--axis {name} needs MIN,MAX,N with N a positive integer, "
@@ -525,6 +533,20 @@ def _check_sweep_arguments(args) -> dict[str, tuple[float, float, int]]:
             raise UsageError(f"--axis {name} has N = {n}, more than --max-designs "
                              f"{args.max_designs}; lower N or raise --max-designs")
         axes[name] = (low, high, n)
+    zernike = [name for name in axes if zernike_axis(name) is not None]
+    if zernike or args.zernike is not None:
+        base = parse_zernike(args.zernike) if args.zernike is not None else {}
+        seidel = [f"--axis {k}" for k in axes if k in COEFFICIENTS]
+        seidel += [f"--{k} {getattr(args, k):g}" for k in COEFFICIENTS if getattr(args, k) != 0]
+        if seidel:
+            raise UsageError(f"give Seidel coefficients or Zernike terms, not both (got "
+                             f"{', '.join(seidel)} with {', '.join(zernike) or '--zernike'})")
+        if "field" in axes:
+            raise UsageError("--axis field sweeps nothing for Zernike terms, which describe "
+                             "one field point; leave it out")
+        given = sorted(set(base) & {zernike_axis(name) for name in zernike})
+        if given:
+            raise UsageError(f"Z{given[0]} is both an --axis and a --zernike term; give it once")
     n = math.prod(spec[2] for spec in axes.values())
     if n > args.max_designs:
         raise UsageError(f"the grid has {n} designs, more than --max-designs "
@@ -551,6 +573,7 @@ def _check_sweep_arguments(args) -> dict[str, tuple[float, float, int]]:
 
 
 def _cmd_sweep(args) -> int:
+    import jax
     import numpy as np
 
     import jmse_jax as jj
@@ -560,7 +583,9 @@ def _cmd_sweep(args) -> int:
     axes = {name: np.linspace(low, high, n).tolist() for name, (low, high, n) in specs.items()}
     n = math.prod(len(v) for v in axes.values())
     cube = jj.hypercube(**axes)
-    fixed = {k: getattr(args, k) for k in COEFFICIENTS}
+    fixed: dict[str, Any] = {k: getattr(args, k) for k in COEFFICIENTS}
+    zernike_axes = {j: name for name in axes if (j := zernike_axis(name)) is not None}
+    base = parse_zernike(args.zernike) if args.zernike is not None else {}
 
     def numbers(name, value):  # the whole computation runs in the designs' dtype
         largest, limit = float(np.max(np.abs(value))), float(np.finfo(args.dtype).max)
@@ -569,15 +594,28 @@ def _cmd_sweep(args) -> int:
                              f"number ({limit:.4g}); use --dtype float64")
         return np.asarray(value, dtype=args.dtype)
 
-    ab = jj.Seidel(**{k: numbers(k, cube.get(k, fixed[k])) for k in COEFFICIENTS})
+    every = np.zeros(n, dtype=args.dtype)
+    ab: jj.AbstractAberrations
+    batch_ab: jj.AbstractAberrations
+    if zernike_axes or base:
+        # One row of coefficients per design, in rising Noll index; a batched Zernike is
+        # made under vmap (its constructor checks one design's shape).
+        noll = tuple(sorted(set(base) | set(zernike_axes)))
+        columns = [numbers(zernike_axes[j], cube[zernike_axes[j]]) if j in zernike_axes
+                   else every + numbers(f"Z{j}", base[j]) for j in noll]
+        coefficients = np.stack([every + c for c in columns], axis=1)
+        ab = jax.vmap(lambda c: jj.Zernike(c, noll=noll))(coefficients)
+        fixed = {"zernike": {str(j): c for j, c in base.items()}}
+        batch_ab = ab
+    else:
+        ab = jj.Seidel(**{k: numbers(k, cube.get(k, fixed[k])) for k in COEFFICIENTS})
+        batch_ab = jj.Seidel(**{k: every + getattr(ab, k) for k in COEFFICIENTS})
     field = numbers("field", cube.get("field", args.field))
     u = numbers("u", cube.get("u", args.u))
     signal = parse_signal(args.signal)
     noise = jj.WhiteNoise(_positive("--noise", args.noise))
     # Under vmap jmse cannot give its warnings for concrete designs: give them here.
-    every = np.zeros(n, dtype=args.dtype)
-    warn_like_jmse(jj.Seidel(**{k: every + getattr(ab, k) for k in COEFFICIENTS}),
-                   every + field, every + u, signal, noise, args.preset)
+    warn_like_jmse(batch_ab, every + field, every + u, signal, noise, args.preset)
     print(f"sweep of {n} designs over {', '.join(f'{k} ({len(v)})' for k, v in axes.items())}; "
           f"preset {args.preset}, grad {args.grad}, {args.dtype}", flush=True)
     with _checked_already():  # the warnings above are sweep_jmse's own: not twice
@@ -757,13 +795,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="JMSE over a small aberration hypercube; .npz + JSON into --out",
         description="JMSE over every combination of the given axes (jmse_jax.hypercube + "
         "sweep_jmse). Each --axis NAME=MIN,MAX,N gives N equally spaced values of NAME "
-        f"({', '.join(SWEEP_AXES)}); the other coefficients take their flag values. Default "
+        f"({', '.join(SWEEP_AXES)}, or Z<j> for the Zernike term of Noll index j, in waves "
+        "RMS, with the terms of --zernike held fixed); the other coefficients take their flag "
+        "values. Default "
         "axes: w020=-3,3,5 and w222=-1.5,1.5,3 (waves). Writes sweep.npz, its JSON header "
         "sweep.json and sweep_summary.json, whose jmse list has null for a design that "
         "failed (its status says why; strict JSON has no Infinity). " + UNITS)
     sw.add_argument("--axis", action="append", metavar="NAME=MIN,MAX,N",
                     help="a grid axis (repeatable); coefficients in waves")
     _add_coefficients(sw, default=0.0, what="held fixed when not an axis")
+    sw.add_argument("--zernike", metavar="NOLL:WAVES,...",
+                    help="Zernike terms held fixed (Z<j> axes vary the others); "
+                    + ZERNIKE_HELP.split(": ", 1)[1])
     sw.add_argument("--field", type=float, default=FIG1_FIELD,
                     help="fractional field height in [0, 1] (when not an axis)")
     sw.add_argument("--u", type=float, default=FIG1_U,
