@@ -523,6 +523,9 @@ def _check_sweep_arguments(args) -> dict[str, tuple[float, float, int]]:
     axes as ``{name: (min, max, n)}``."""
     if args.max_designs < 1:
         raise UsageError(f"--max-designs must be a positive integer, got {args.max_designs}")
+    if args.zernike is not None and not args.axis:
+        raise UsageError("--zernike needs at least one --axis (e.g. --axis Z4=-0.5,0.5,5 or "
+                         "--axis u=0.1,0.5,5): the default axes are Seidel coefficients")
     axes = {}
     for text in args.axis or ["w020=-3,3,5", "w222=-1.5,1.5,3"]:
         name, low, high, n = axis_spec(text)

@@ -538,10 +538,12 @@ def test_sweep_writes_npz_and_json(capsys, tmp_path):
 @pytest.mark.parametrize("argv, words", [
     (("--axis", "Z0=0,1,2"), ("Z<j> (a Zernike term, Noll index j >= 1)", "'Z0=0,1,2'")),
     (("--axis", "Z4=0,1,2", "--axis", "w020=0,1,2"), ("not both", "--axis w020", "Z4")),
-    (("--zernike", "4:0.5", "--w131", "1"), ("not both", "--w131 1", "--zernike")),
+    (("--axis", "u=0.2,0.3,2", "--zernike", "4:0.5", "--w131", "1"),
+     ("not both", "--w131 1", "--zernike")),
     (("--axis", "Z4=0,1,2", "--axis", "field=0,1,2"), ("--axis field sweeps nothing",)),
     (("--axis", "Z4=0,1,2", "--zernike", "4:0.1,11:0.2"), ("Z4 is both an --axis and",)),
     (("--axis", "Z4=0,1,2", "--zernike", "4"), ("zernike must be NOLL:WAVES pairs",)),
+    (("--zernike", "4:0.5"), ("--zernike needs at least one --axis",)),
 ])
 def test_sweep_refuses_bad_zernike_terms(capsys, tmp_path, no_computation, argv, words):
     status, _, err = run_cli(capsys, "sweep", *argv, "--out", str(tmp_path / "out"))
