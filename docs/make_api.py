@@ -13,6 +13,7 @@ checks that the file is current, so a change of signature or docstring shows up 
 from __future__ import annotations
 
 import ast
+import enum
 import importlib
 import inspect
 import pathlib
@@ -118,7 +119,7 @@ def entry(module, name: str, defined_in: str) -> list[str]:
     obj = getattr(module, name)
     source = defined_in.replace(".", "/") + ".py"
     if inspect.isclass(obj):
-        kind = "enumeration" if issubclass(obj, __import__("enum").Enum) else "class"
+        kind = "enumeration" if issubclass(obj, enum.Enum) else "class"
         abstract = kind != "class" or name.startswith("Abstract")
         constructor = signature(obj).removesuffix(" -> None")
         head = f"### `{name}`" if abstract else f"### `{name}{constructor}`"

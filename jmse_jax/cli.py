@@ -128,11 +128,9 @@ def parse_zernike(value, name: str = "zernike") -> dict[int, float]:
         raise UsageError(f"{name} must name at least one Zernike term, got none")
     terms: dict[int, float] = {}
     for index, coefficient in pairs:
-        try:
-            j = int(index)
-        except (TypeError, ValueError):
-            j = 0
-        if isinstance(index, bool) or str(j) != str(index).strip() or j < 1:
+        digits = str(index).strip()
+        j = int(digits) if digits.isdigit() and not isinstance(index, bool) else 0
+        if j < 1:
             raise UsageError(f"{name}: a Noll index must be an integer >= 1, got {index!r}")
         if j in terms:
             raise UsageError(f"{name}: Noll index {j} is given twice")
