@@ -488,7 +488,7 @@ SWEEP_FILES = ("sweep.npz", "sweep.json", "sweep_summary.json")
 
 def zernike_axis(name: str) -> int | None:
     """The Noll index of an axis named ``Z<j>`` (``j >= 1``), else None."""
-    if len(name) > 1 and name[0] == "Z" and name[1:].isdigit() and name[1] != "0":
+    if len(name) > 1 and name[0] == "Z" and name[1:].isdigit() and int(name[1:]) >= 1:
         return int(name[1:])
     return None
 
@@ -501,6 +501,8 @@ def axis_spec(text: str) -> tuple[str, float, float, int]:
         raise UsageError(f"--axis must be NAME=MIN,MAX,N with NAME one of "
                          f"{', '.join(SWEEP_AXES)} or Z<j> (a Zernike term, Noll index "
                          f"j >= 1), got {text!r}")
+    if zernike_axis(name) is not None:
+        name = f"Z{zernike_axis(name)}"  # Z04 is Z4, so that a term is not swept twice
     values = _floats(rest, f"--axis {name}")
     if len(values) != 3 or values[2] != int(values[2]) or values[2] < 1:
         raise UsageError(f"--axis {name} needs MIN,MAX,N with N a positive integer, "

@@ -542,6 +542,7 @@ def test_sweep_writes_npz_and_json(capsys, tmp_path):
      ("not both", "--w131 1", "--zernike")),
     (("--axis", "Z4=0,1,2", "--axis", "field=0,1,2"), ("--axis field sweeps nothing",)),
     (("--axis", "Z4=0,1,2", "--zernike", "4:0.1,11:0.2"), ("Z4 is both an --axis and",)),
+    (("--axis", "Z4=0,1,2", "--axis", "Z04=0,1,2"), ("--axis Z4 is given twice",)),
     (("--axis", "Z4=0,1,2", "--zernike", "4"), ("zernike must be NOLL:WAVES pairs",)),
     (("--zernike", "4:0.5"), ("--zernike needs at least one --axis",)),
 ])
