@@ -105,13 +105,11 @@ def members(cls) -> list[str]:
     for name, attribute in sorted(vars(cls).items()):
         if name.startswith("_"):
             continue
+        function = getattr(attribute, "__func__", attribute)  # static and class methods
         if isinstance(attribute, property):
             lines.append(f"  - `.{name}` (property): {member_doc(cls, name)}")
-        elif isinstance(attribute, (staticmethod, classmethod)):
-            function = attribute.__func__
+        elif inspect.isfunction(function):
             lines.append(f"  - `.{name}{signature(function)}`: {member_doc(cls, name)}")
-        elif inspect.isfunction(attribute):
-            lines.append(f"  - `.{name}{signature(attribute)}`: {member_doc(cls, name)}")
     return lines
 
 

@@ -249,8 +249,9 @@ def fig4_right(ps: Sequence[int], defocus_values=(-6.0, -2.75), reference_preset
     rules = PAPER_RULES + ("polar",)
     overlap = jmse_options("high")["overlap_nodes"]
     signal, noise = fig1_spectra()
-    out: dict[str, Any] = dict(u=FIG1_U, field=FIG1_FIELD, ps=list(ps), overlap_nodes=list(overlap),
-               signal=repr(signal), noise=repr(noise), rules=list(rules), defocus={})
+    out: dict[str, Any] = dict(
+        u=FIG1_U, field=FIG1_FIELD, ps=list(ps), overlap_nodes=list(overlap),
+        signal=repr(signal), noise=repr(noise), rules=list(rules), defocus={})
     for defocus in defocus_values:
         aberrations = Seidel(**{**FIG1, "w020": defocus})
         start = time.perf_counter()

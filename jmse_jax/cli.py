@@ -605,8 +605,8 @@ def _cmd_sweep(args) -> int:
         # made under vmap (its constructor checks one design's shape).
         noll = tuple(sorted(set(base) | set(zernike_axes)))
         columns = [numbers(f"axis Z{j}", cube[zernike_axes[j]]) if j in zernike_axes
-                   else every + numbers(f"zernike Z{j}", base[j]) for j in noll]
-        coefficients = np.stack([every + c for c in columns], axis=1)
+                   else numbers(f"zernike Z{j}", base[j]) for j in noll]
+        coefficients = np.stack([every + c for c in columns], axis=1)  # fixed terms: (n,)
         ab = jax.vmap(lambda c: jj.Zernike(c, noll=noll))(coefficients)
         fixed = {"zernike": {str(j): c for j, c in base.items()}}
         batch_ab = ab
