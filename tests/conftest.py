@@ -23,6 +23,19 @@ if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="jmse_jax_test_jit_")
     os.environ["JMSE_JAX_TEST_CACHE_OWNER"] = str(os.getpid())
 os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.3")
+# The suite compiles its programs with LLVM's optimisations off (XLA's backend level 0):
+# compilation is most of its time, and this takes 25-45 % off the compile-bound tests, while
+# code that runs long gets 2-4 times slower (so the finer grids' references of the default
+# run's heaviest accuracy checks are stored: ``test_merit.STORED_REFERENCES``). It changes
+# how the arithmetic is scheduled, not what it computes (XLA's CPU code is not fast-math):
+# results agree to rounding. ``test_readme.py`` runs the README example with the optimised
+# code users get, in a process without this flag, and checks its value, gradient, baseline
+# and OTF against this process's to 1e-11. A level the caller set in ``XLA_FLAGS`` is kept
+# (``XLA_FLAGS=--xla_backend_optimization_level=2 make test`` runs the suite on the users'
+# code).
+if "--xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = " ".join(
+        (os.environ.get("XLA_FLAGS", ""), "--xla_backend_optimization_level=0")).strip()
 
 import jax  # noqa: E402
 

@@ -704,15 +704,18 @@ def test_zernike_astigmatism_takes_the_larger_of_its_two_seidel_forms():
     assert zernike == pytest.approx(1.4, rel=1e-9)
 
 
+#: The finer polar grid of ``_route_and_reference`` (and of ``STORED_REFERENCES``' first).
+ROUTE_REFERENCE_GRID = dict(nodes=(160, 80), se_nodes=(6400, 512), overlap_nodes=(128, 128),
+                            overlap_floor=128, peaks=True)
+
+
 def _route_and_reference(ab, u, signal, noise):
     """The default's route of a concrete design at field 0.5 (no warning allowed) and a
     finer polar grid's value (converged to about 1e-6 or better on the designs here)."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         route = _route(ab, 0.5, u, signal, noise)
-    reference = float(jj.jmse(ab, 0.5, u, signal, noise, nodes=(160, 80),
-                              se_nodes=(6400, 512), overlap_nodes=(128, 128),
-                              overlap_floor=128, peaks=True))
+    reference = float(jj.jmse(ab, 0.5, u, signal, noise, **ROUTE_REFERENCE_GRID))
     return route, reference
 
 
@@ -861,6 +864,67 @@ def test_shapes_beyond_seidel_are_accurate_in_their_routes():
     assert abs(own / reference - 1.0) > 1e-5
 
 
+#: Defocus with ``Z28`` at u = 0.3 in the balanced plan (``benchmarks/zernike_routes.py``).
+DEGREE_OVERLAP_Z28 = jj.Zernike([0.8701630593005899, -1.770897977784089], noll=(4, 28))
+#: A Noll 4-22 design with quadrafoil from session 82's climb (its test below).
+CLIMBED_QUADRAFOIL = jj.Zernike(
+    [-1.5204, 2.0959, -0.6439, 1.1089, -0.5506, -0.4938, 0.567, 0.2106, 0.2, 0.032, -0.568,
+     -0.271, -0.4047, 0.0569, -0.1766, 0.0198, 0.0923, 0.1268, -0.0508],
+    noll=tuple(range(4, 23)))
+#: Finer polar grids' float64 values for the accuracy checks of the default's balanced plan
+#: on designs beyond Seidel's degree below: ``name -> (value, grid)``. Each finer grid costs
+#: 5-20 s of run time (three to five times that with the suite's unoptimised code, conftest),
+#: so the default run reads the value and ``test_stored_references_are_their_finer_grids``
+#: (slow, ``make test-slow``) computes each again from its design and grid (computed
+#: 2026-12-06, jax 0.10.2, commit f442289, where the tests computed them inline).
+STORED_REFERENCES = {
+    "defocus_z28": (0.014520459578383545, ROUTE_REFERENCE_GRID),
+    "quadrafoil": (0.013871327760076761, dict(nodes=(128, 80), se_nodes=(6400, 768),
+                                              overlap_nodes=(112, 112), overlap_floor=112)),
+    **{f"degree_plan_{name}": (value, dict(
+        nodes=(160, 128), se_nodes=(6400, 1280), overlap_nodes=(160, 160), overlap_floor=128,
+        peaks=True)) for name, value in (("angular", 0.0447649692132786),
+                                         ("overlap", 0.022143267795505468),
+                                         ("fine", 2.361024129149953e-05))},
+}
+
+
+def _stored_designs():
+    """``STORED_REFERENCES``' designs: name -> (aberrations, field, u, signal, noise)."""
+    designs = {
+        "defocus_z28": (DEGREE_OVERLAP_Z28, 0.5, 0.3, jj.MarkovSignal(1.0, 5.0),
+                        jj.WhiteNoise(1e-4)),
+        "quadrafoil": (CLIMBED_QUADRAFOIL, 0.5, 0.29, jj.MarkovSignal(1.0, 5.0),
+                       jj.WhiteNoise(1e-4)),
+    }
+    for name, (coefficients, field, u, spectrum, noise) in DEGREE_PLAN_DESIGNS.items():
+        designs[f"degree_plan_{name}"] = (
+            jj.Zernike(coefficients, noll=tuple(range(4, 23))), field, u,
+            jj.PowerLawSignal(*spectrum), jj.WhiteNoise(noise))
+    return designs
+
+
+def _stored_reference(name, design):
+    """``STORED_REFERENCES[name]``'s value, after checking that ``design`` is the design it
+    was computed for (so a design edited in a test cannot keep a stale reference)."""
+    stored = jax.tree_util.tree_leaves(_stored_designs()[name])
+    given = jax.tree_util.tree_leaves(design)
+    assert len(stored) == len(given), name
+    assert all(np.array_equal(np.asarray(a), np.asarray(b))
+               for a, b in zip(stored, given, strict=True)), name
+    return STORED_REFERENCES[name][0]
+
+
+# Slow: the five finer grids of STORED_REFERENCES (about 45 s here, optimised code).
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(STORED_REFERENCES))
+def test_stored_references_are_their_finer_grids(name):
+    """Each stored reference is its finer grid's value (to rounding, which may differ
+    between jax versions)."""
+    value, grid = STORED_REFERENCES[name]
+    assert float(jj.jmse(*_stored_designs()[name], **grid)) == pytest.approx(value, rel=1e-11)
+
+
 def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_rule():
     """Defocus with ``Z28`` (``rho^6 cos 6 theta``) at u = 0.3 (slope 46, past
     ``STEEP_SLOPE``; it cancels nothing) takes the balanced plan, which in a program for
@@ -869,8 +933,11 @@ def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_ru
     (``benchmarks/zernike_routes.py``). Programs for Seidel designs and for Zernike designs
     of Seidel's degree keep ``BALANCED_GRID``."""
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
-    ab = jj.Zernike([0.8701630593005899, -1.770897977784089], noll=(4, 28))
-    route, reference = _route_and_reference(ab, 0.3, signal, noise)
+    ab = DEGREE_OVERLAP_Z28
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        route = _route(ab, 0.5, 0.3, signal, noise)
+    reference = _stored_reference("defocus_z28", (ab, 0.5, 0.3, signal, noise))
     assert route["balanced"]
     assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
     alone = float(jj.jmse(ab, 0.5, 0.3, signal, noise, **jj.BALANCED_GRID))
@@ -939,12 +1006,8 @@ def test_default_balanced_plan_beyond_seidel_degree_holds_quadrafoil():
     with peaks, moves by 1.4e-8). With the balanced grid's 48 angular OTF nodes (the
     default's plan until then) it was 1.5e-4 off, silently; Seidel's shapes, on which those
     counts were set, have no term of angular order above 2 (``DEGREE_NODES``)."""
-    ab = jj.Zernike([-1.5204, 2.0959, -0.6439, 1.1089, -0.5506, -0.4938, 0.567, 0.2106, 0.2,
-                     0.032, -0.568, -0.271, -0.4047, 0.0569, -0.1766, 0.0198, 0.0923, 0.1268,
-                     -0.0508], noll=tuple(range(4, 23)))
-    design = (ab, 0.5, 0.29, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4))
-    reference = float(jj.jmse(*design, nodes=(128, 80), se_nodes=(6400, 768),
-                              overlap_nodes=(112, 112), overlap_floor=112))
+    design = (CLIMBED_QUADRAFOIL, 0.5, 0.29, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4))
+    reference = _stored_reference("quadrafoil", design)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         value = float(jj.jmse(*design))
@@ -981,8 +1044,7 @@ def test_default_balanced_plan_beyond_seidel_degree_holds_the_climbed_designs(na
     coefficients, field, u, spectrum, noise = DEGREE_PLAN_DESIGNS[name]
     design = (jj.Zernike(coefficients, noll=tuple(range(4, 23))), field, u,
               jj.PowerLawSignal(*spectrum), jj.WhiteNoise(noise))
-    reference = float(jj.jmse(*design, nodes=(160, 128), se_nodes=(6400, 1280),
-                              overlap_nodes=(160, 160), overlap_floor=128, peaks=True))
+    reference = _stored_reference(f"degree_plan_{name}", design)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         value = float(jj.jmse(*design))
