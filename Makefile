@@ -27,8 +27,11 @@ test: $(BIN)/.installed
 
 # The heavier checks the default run leaves out (second derivatives, the GPU's vectorised
 # batching, float32 twins of float64 checks, the CLI's compile cache): tests marked slow.
+# Many of them run finer grids for long, so they run the optimised code users get (the
+# default run compiles with LLVM's optimisations off: tests/conftest.py).
 test-slow: $(BIN)/.installed
-	$(BIN)/python -m pytest -q -n auto --dist loadfile -m slow
+	XLA_FLAGS="$$XLA_FLAGS --xla_backend_optimization_level=2" \
+		$(BIN)/python -m pytest -q -n auto --dist loadfile -m slow
 
 # The test suite on the oldest dependency versions the package supports (constraints-oldest.txt,
 # the floors of pyproject.toml), in a virtual environment of its own.

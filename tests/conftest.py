@@ -32,7 +32,7 @@ os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.3")
 # code users get, in a process without this flag, and checks its value, gradient, baseline
 # and OTF against this process's to 1e-11. A level the caller set in ``XLA_FLAGS`` is kept
 # (``XLA_FLAGS=--xla_backend_optimization_level=2 make test`` runs the suite on the users'
-# code).
+# code; ``make test-slow`` sets it, since its checks run long).
 if "--xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = " ".join(
         (os.environ.get("XLA_FLAGS", ""), "--xla_backend_optimization_level=0")).strip()

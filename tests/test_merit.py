@@ -915,7 +915,8 @@ def _stored_reference(name, design):
     return STORED_REFERENCES[name][0]
 
 
-# Slow: the five finer grids of STORED_REFERENCES (about 45 s here, optimised code).
+# Slow: the five finer grids of STORED_REFERENCES (34 s for the largest on the 2-core host,
+# with the optimised code `make test-slow` runs).
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(STORED_REFERENCES))
 def test_stored_references_are_their_finer_grids(name):
