@@ -51,9 +51,9 @@ def test_optimised_code_users_get_gives_the_suite_numbers():
     """The suite compiles with LLVM's optimisations off (conftest). With XLA's default
     optimisation, as users run the library (a process without the flag), the value,
     gradient, baseline and OTF agree with the suite's to rounding: the flag changes how the
-    arithmetic is scheduled, not what it computes."""
-    assert "--xla_backend_optimization_level=0" in os.environ["XLA_FLAGS"]
-    flags = [f for f in os.environ["XLA_FLAGS"].split()
+    arithmetic is scheduled, not what it computes. (Where the caller runs the suite at
+    XLA's default level, conftest, the two processes compile alike.)"""
+    flags = [f for f in os.environ.get("XLA_FLAGS", "").split()
              if not f.startswith("--xla_backend_optimization_level")]
     script = ("import json, jax\njax.config.update('jax_enable_x64', True)\n"
               "import test_readme\nprint(json.dumps(test_readme._fig1_numbers()))\n")
