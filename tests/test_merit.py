@@ -709,12 +709,15 @@ ROUTE_REFERENCE_GRID = dict(nodes=(160, 80), se_nodes=(6400, 512), overlap_nodes
                             overlap_floor=128, peaks=True)
 
 
-def _route_and_reference(ab, u, signal, noise):
+def _route_and_reference(ab, u, signal, noise, stored=None):
     """The default's route of a concrete design at field 0.5 (no warning allowed) and a
-    finer polar grid's value (converged to about 1e-6 or better on the designs here)."""
+    finer polar grid's value (converged to about 1e-6 or better on the designs here): the
+    entry ``stored`` of ``STORED_REFERENCES`` where one is named."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         route = _route(ab, 0.5, u, signal, noise)
+    if stored is not None:
+        return route, _stored_reference(stored, (ab, 0.5, u, signal, noise))
     reference = float(jj.jmse(ab, 0.5, u, signal, noise, **ROUTE_REFERENCE_GRID))
     return route, reference
 
@@ -906,10 +909,11 @@ def _stored_designs():
 
 def _stored_reference(name, design):
     """``STORED_REFERENCES[name]``'s value, after checking that ``design`` is the design it
-    was computed for (so a design edited in a test cannot keep a stale reference)."""
-    stored = jax.tree_util.tree_leaves(_stored_designs()[name])
-    given = jax.tree_util.tree_leaves(design)
-    assert len(stored) == len(given), name
+    was computed for (so a design edited in a test cannot keep a stale reference): the same
+    structure (Noll indices included) and the same values."""
+    stored, structure = jax.tree_util.tree_flatten(_stored_designs()[name])
+    given, given_structure = jax.tree_util.tree_flatten(design)
+    assert given_structure == structure, name
     assert all(np.array_equal(np.asarray(a), np.asarray(b))
                for a, b in zip(stored, given, strict=True)), name
     return STORED_REFERENCES[name][0]
@@ -935,10 +939,7 @@ def test_balanced_plan_of_designs_beyond_seidel_degree_has_the_degree_overlap_ru
     of Seidel's degree keep ``BALANCED_GRID``."""
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-4)
     ab = DEGREE_OVERLAP_Z28
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        route = _route(ab, 0.5, 0.3, signal, noise)
-    reference = _stored_reference("defocus_z28", (ab, 0.5, 0.3, signal, noise))
+    route, reference = _route_and_reference(ab, 0.3, signal, noise, stored="defocus_z28")
     assert route["balanced"]
     assert float(route["value"]) == pytest.approx(reference, rel=1e-5)
     alone = float(jj.jmse(ab, 0.5, 0.3, signal, noise, **jj.BALANCED_GRID))
