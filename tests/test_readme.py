@@ -38,7 +38,9 @@ def test_readme_example_runs_and_matches_fig1_value():
 
 def _fig1_numbers():
     """The Fig. 1 point's value and gradient (``jmse``, the derivative taken outside
-    ``jit``), its baseline at B = 64 and one OTF value."""
+    ``jit``), its baseline at B = 64 and one OTF value. The coefficients are written out
+    rather than taken from ``conftest.FIG1_COEFFICIENTS``: the witness's subprocess imports
+    this module, and importing conftest would put it back at the suite's level 0."""
     ab = jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198)
     design = (ab, 0.95, 0.2, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3))
     value, grad = jax.value_and_grad(jj.jmse)(*design)
