@@ -28,6 +28,7 @@ __all__ = [
     "check_finite_tree",
     "check_range",
     "common_dtype",
+    "cos_2pi",
     "cos_sin_2pi",
     "cos_sin_2pi_stacked",
     "gauss_legendre",
@@ -191,6 +192,18 @@ def _cos_sin_2pi_stacked_jvp(primals, tangents):
     e = cos_sin_2pi_stacked(x)
     rotated = jnp.stack([-e[..., 1, :], e[..., 0, :]], axis=-2)
     return e, (2.0 * math.pi) * rotated * dx[..., None, :]
+
+
+def cos_2pi(x):
+    """``cos(2 pi x)`` alone, as ``cos_sin_2pi_stacked`` computes its cosine entry: one
+    polynomial per entry, ``1 - 2 sin(pi r)^2`` with ``r = x - round(x)`` (exact). For
+    integrands known to be even, whose sine part cancels (the overlap engine's rotationally
+    symmetric path). No derivative rule of its own: its callers differentiate through
+    ``cos_sin_2pi_stacked``, and a derivative taken through it is the polynomial's own."""
+    r = x - jnp.round(x)
+    coefficients = _SIN_PI_R_F32 if is_single_precision(x.dtype) else _SIN_PI_R
+    s = _even_poly(coefficients, r * r) * r
+    return 1.0 - 2.0 * (s * s)
 
 
 def runtime_one(x):

@@ -47,6 +47,7 @@ from ._numerics import (
     check_finite_tree,
     check_range,
     common_dtype,
+    cos_2pi,
     cos_sin_2pi,
     cos_sin_2pi_stacked,
     gauss_legendre,
@@ -69,6 +70,9 @@ _OVERLAP_BLOCK = 128
 
 #: Integrate the chords of the overlap lens in closed form when the wavefront allows it.
 _EXACT_CHORDS = False
+
+# The lens's two halves (``_chord_phase``'s ``sides``).
+_BOTH = (1.0, -1.0)
 
 
 def diffraction_limited_otf(r):
@@ -125,6 +129,20 @@ def _overlap_rule(n_phi: int, n_t: int, chord_points: int):
     t_colloc = np.cos(np.pi * (q + 0.5) / chord_points)[::-1].copy()
     interp = barycentric_matrix(t_colloc, t)
     return frac, w_frac, t_colloc, interp, interp * w_t[:, None]
+
+
+@functools.cache
+def _even_overlap_rule(n_phi: int, n_t: int, chord_points: int):
+    """``_overlap_rule`` for integrands even in ``t``: the Gauss nodes ``t_j >= 0`` alone,
+    each weight doubled but the middle node's (odd ``n_t``), so that the half rule sums
+    what the whole rule sums. Returns ``frac, w_frac, t_colloc, interp, moment`` with
+    ``interp`` and ``moment`` of ``ceil(n_t / 2)`` rows."""
+    frac, w_frac, t_colloc, interp, _ = _overlap_rule(n_phi, n_t, chord_points)
+    t, w_t = gauss_legendre(n_t, -1.0, 1.0)
+    keep = np.flatnonzero(t >= -1e-14)  # the middle node of an odd rule sits at 0
+    w_half = np.where(np.abs(t[keep]) > 1e-14, 2.0 * w_t[keep], w_t[keep])
+    half = interp[keep]
+    return frac, w_frac, t_colloc, half, half * w_half[:, None]
 
 
 @jax.custom_jvp
@@ -192,6 +210,28 @@ def _phase_integral_jvp(primals, tangents):
     return (re, im), (d_re, d_im)
 
 
+@jax.custom_jvp
+def _even_phase_integral(phase, weights, interp, moment):
+    """The real part of ``_phase_integral`` for phases whose cosine part is all there is
+    (the rotationally symmetric path of ``_otf_overlap_flat``): the value takes the cosine
+    alone, one polynomial per node; the derivative rule forms both moments, since the
+    tangent needs the sine's."""
+    trig = cos_2pi(_phase_at_nodes(phase, interp))  # (..., chords, J)
+    parts = jnp.einsum("...kj,j->...k", trig, jnp.sum(moment, axis=-1), precision=EXACT)
+    return jnp.sum(weights * parts, axis=-1)
+
+
+@_even_phase_integral.defjvp
+def _even_phase_integral_jvp(primals, tangents):
+    phase, weights, interp, moment = primals
+    d_phase, d_weights, _, _ = tangents
+    cos_m, sin_m = _phase_moments(phase, interp, moment)
+    re = _contract(weights, cos_m)
+    two_pi_w = (2.0 * math.pi) * weights[..., None]
+    d_re = _contract(d_weights, cos_m) - jnp.sum(two_pi_w * sin_m * d_phase, axis=(-2, -1))
+    return re, d_re
+
+
 def _gauss_chords(phase, chord_w, n_phi, chord_points, interp, moment):
     """Chord integrals by the Gauss rule in ``t`` (phase given at the collocation points)."""
     weights = jnp.broadcast_to(chord_w[:, None, :], (chord_w.shape[0], 2, n_phi))
@@ -208,8 +248,8 @@ def _exact_chords(aberrations) -> bool:
     return _EXACT_CHORDS and degree is not None and degree <= 2
 
 
-@jax.checkpoint
-def _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc):
+@functools.partial(jax.checkpoint, static_argnums=(9,))
+def _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc, sides):
     """Phase difference ``W(xi + nu) - W(xi - nu)`` [waves] at the collocation points of
     every chord, ``(N, 2 halves, n_phi, Q)`` (``nu`` in cutoff units shifts each copy of the
     unit-radius pupil by ``nu``).
@@ -218,10 +258,11 @@ def _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc):
     instead of storing the wavefront's terms at every collocation point (one array of the
     phase's size per term, tens of MB per call in all, which XLA's CPU runtime maps afresh
     and page-faults on every call). ``(nx, ny)`` is ``nu``, ``(ex, ey)`` its direction,
-    ``a`` each chord's distance from the lens's mid-line and ``sin_phi`` its half-length.
+    ``a`` each chord's distance from the lens's mid-line and ``sin_phi`` its half-length;
+    ``sides``: the lens's halves to take (the symmetric path takes one).
     """
     # Chord points xi = side * a * e + t sin(phi) * e_perp, e_perp = (-ey, ex), on both halves.
-    side = jnp.asarray([1.0, -1.0], a.dtype)
+    side = jnp.asarray(sides, a.dtype)
     along = side[None, :, None, None] * a[:, None, :, None]  # (N, 2, n_phi, 1)
     across = (sin_phi[:, :, None] * t_colloc[None, None, :])[:, None, :, :]  # (N, 1, n_phi, Q)
     ex4, ey4 = ex[:, None, None, None], ey[:, None, None, None]
@@ -231,17 +272,26 @@ def _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc):
     return aberrations.difference(xi_x, xi_y, dx, dy, field)
 
 
-def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype, zero_slope=None):
+def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype, zero_slope=None,
+                      symmetric=False):
     """Overlap-quadrature OTF at a flat vector of nodes; returns (real, imag).
 
     ``zero_slope``: the wavefront's mean gradient (``_mean_gradient``), which gives ``Im H``
     its derivative at ``nu = 0`` (``Re H`` has a cone there: derivative 0); without it both
-    derivatives there are 0 (``jmse`` never evaluates ``nu = 0``)."""
-    exact = _exact_chords(aberrations)
+    derivatives there are 0 (``jmse`` never evaluates ``nu = 0``).
+
+    ``symmetric``: the wavefront is rotationally symmetric, in its value and in every
+    tangent (the one-ray plans' ``symmetric_part``). Its phase difference is then odd
+    through the lens's centre and even along each chord, so ``H`` is real and the rule
+    takes one half of the lens, the nodes ``t >= 0`` of each chord and the cosine alone: a
+    quarter of the nodes, each one polynomial instead of two. The sum is the whole rule's
+    to rounding; the imaginary part is returned as exact zeros."""
+    exact = _exact_chords(aberrations) and not symmetric
     degree = aberrations.chord_degree
     chord_points = n_t if degree is None or degree + 1 >= n_t else degree + 1
+    rule = _even_overlap_rule if symmetric else _overlap_rule
     frac, w_frac, t_colloc, interp, moment = (
-        jnp.asarray(a, dtype) for a in _overlap_rule(n_phi, n_t, chord_points)
+        jnp.asarray(a, dtype) for a in rule(n_phi, n_t, chord_points)
     )
     if exact:  # the phase at t = -1, 0, 1 fixes the quadratic; the t integral is exact
         t_colloc = jnp.asarray([-1.0, 0.0, 1.0], dtype)
@@ -262,12 +312,17 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype, zero_sl
     # under reverse mode, each coefficient's derivative).
     a, sin_phi = materialise(a, sin_phi)
     chord_w = phi_max[:, None] * w_frac[None, :] * sin_phi**2  # (N, n_phi)
-    phase = _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc)
-    if exact:
+    if symmetric:  # one half, twice: its mirror image through the centre is its conjugate
+        phase = _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc, (1.0,))
+        re = _even_phase_integral(phase[:, 0], 2.0 * chord_w, interp, moment)
+        im = jnp.zeros_like(re)
+    elif exact:
+        phase = _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc, _BOTH)
         j_re, j_im = chord_integral(phase[..., 0], phase[..., 1], phase[..., 2])
         w = chord_w[:, None, :]
         re, im = jnp.sum(w * j_re, axis=(1, 2)), jnp.sum(w * j_im, axis=(1, 2))
     else:
+        phase = _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc, _BOTH)
         re, im = _gauss_chords(phase, chord_w, n_phi, chord_points, interp, moment)
     # Rescale by exact lens area / rule's lens area: exact for the unaberrated pupil.
     rule_area = 4.0 * jnp.sum(chord_w, axis=1)
@@ -309,10 +364,13 @@ def along_chord_order(n_t: int, dtype) -> int:
     return n_t
 
 
-def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False, zero_slope=False):
+def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False, zero_slope=False,
+                 symmetric=False):
     """Overlap-engine OTF at ``(nu_x, nu_y)``; ``remat``: when the nodes span several blocks,
     reverse mode recomputes each block instead of storing its chord moments (less memory,
-    more time); ``zero_slope``: give ``Im H`` its derivative at ``nu = 0`` (``otf``)."""
+    more time); ``zero_slope``: give ``Im H`` its derivative at ``nu = 0`` (``otf``);
+    ``symmetric``: the wavefront is rotationally symmetric in value and tangents, so a
+    quarter of the rule serves (``_otf_overlap_flat``)."""
     n_phi, n_t = nodes
     dtype = common_dtype(aberrations, nu_x, nu_y, field)
     n_t = along_chord_order(n_t, dtype)
@@ -325,7 +383,7 @@ def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False, zero_slope=
     block = max(1, min(n, _OVERLAP_BLOCK * 1024 // (n_phi * n_t)))
     if n <= block:
         re, im = _otf_overlap_flat(aberrations, flat_x, flat_y, field, n_phi, n_t, dtype,
-                                   slope)
+                                   slope, symmetric)
     else:
         # Equal blocks no larger than the cap: the fewest blocks, padded by < n_blocks nodes
         # (a fixed block size padded the last block by up to a whole block of dead work).
@@ -337,7 +395,7 @@ def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False, zero_slope=
 
         def one_block(xy):
             return _otf_overlap_flat(aberrations, xy[0], xy[1], field, n_phi, n_t, dtype,
-                                     slope)
+                                     slope, symmetric)
 
         if remat:
             one_block = jax.checkpoint(one_block)

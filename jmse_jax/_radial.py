@@ -354,11 +354,12 @@ def radial_band_integral(aberrations, field, u, signal, noise, options, dtype):
     # call keeps the program (and its compile time) small.
     r_coarse = jnp.concatenate([a * jnp.asarray(t_c, dtype),
                                 u + length_b * jnp.asarray(v_c * v_c, dtype)])
-    h = _otf_overlap(aberrations, r_coarse, jnp.zeros_like(r_coarse), field, overlap)
-    # H is real for these wavefronts: the phase difference is odd under xi -> -xi, and the
-    # overlap rule is symmetric, so Im(H) is rounding. Real products interpolate it to the
-    # fine nodes (half the work of complex ones).
-    h = jnp.real(h)
+    # H is real for these wavefronts: the phase difference is odd under xi -> -xi and even
+    # along each chord of the overlap lens, so the engine takes a quarter of its rule and
+    # the cosine alone (``symmetric``), and real products interpolate H to the fine nodes
+    # (half the work of complex ones).
+    h = jnp.real(_otf_overlap(aberrations, r_coarse, jnp.zeros_like(r_coarse), field, overlap,
+                              symmetric=True))
     h_a = _interpolate(interp_a, h[:n_a], dtype)
     h_b = _interpolate(interp_b, h[n_a:], dtype)
     t_f, w_t, v_f, w_v = (jnp.asarray(x, dtype) for x in (t_f, w_t, v_f, w_v))

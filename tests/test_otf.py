@@ -85,6 +85,60 @@ def test_hopkins_defocus_values(w020, nu_x, expected):
     assert oracles.otf({"w020": w020}, nu_x, 0.0, 0.0).real == pytest.approx(expected, abs=1e-8)
 
 
+_SYMMETRIC_DESIGNS = [
+    jj.Seidel(w020=0.5),
+    jj.Seidel(w020=3.0, w040=-2.5),
+    jj.Zernike(jnp.asarray([1.5, -0.7, 0.3]), noll=(4, 11, 22)),
+]
+
+
+@pytest.mark.parametrize("design", range(len(_SYMMETRIC_DESIGNS)))
+@pytest.mark.parametrize("order", [(24, 24), (9, 7)])
+def test_symmetric_path_is_the_whole_rule(design, order):
+    """The rotationally symmetric path (one half of the lens, the chords' nodes t >= 0, the
+    cosine alone; the one-ray plans') against the whole rule at the same order: values,
+    forward and reverse derivatives in the coefficients and in the frequency, to rounding,
+    at even and odd orders, at nu = 0 and past the cutoff (the rule's singular points)."""
+    from jmse_jax._otf import _otf_overlap
+
+    ab = _SYMMETRIC_DESIGNS[design]
+    r = jnp.concatenate([jnp.asarray([0.0]), jnp.linspace(0.0, 1.0, 19)[1:-1],
+                         jnp.asarray([1.0, 1.2])])
+
+    def h(ab, r, symmetric):
+        return jnp.real(_otf_overlap(ab, r, jnp.zeros_like(r), 0.0, order, symmetric=symmetric))
+
+    whole, half = h(ab, r, False), h(ab, r, True)
+    np.testing.assert_allclose(half, whole, rtol=0, atol=2e-15)
+    assert float(half[0]) == 1.0 and float(half[-1]) == 0.0 and float(half[-2]) == 0.0
+    assert np.all(np.asarray(jnp.imag(_otf_overlap(ab, r, 0 * r, 0.0, order, symmetric=True)))
+                  == 0.0)
+    for jac in (jax.jacfwd, jax.jacrev):
+        expected = jac(h, argnums=(0, 1))(ab, r, False)
+        got = jac(h, argnums=(0, 1))(ab, r, True)
+        for e, g in zip(jax.tree_util.tree_leaves(expected), jax.tree_util.tree_leaves(got),
+                        strict=True):
+            np.testing.assert_allclose(g, e, rtol=0, atol=2e-13 * (1 + float(jnp.max(jnp.abs(e)))))
+            assert np.all(np.isfinite(g))
+    # Hopkins's defocus values (SPEC §5) from the symmetric path as well.
+    if design == 0 and order == (24, 24):
+        values = h(ab, jnp.asarray([0.2, 0.4]), True)
+        np.testing.assert_allclose(values, [0.43481896, 0.12569082], atol=1e-8)
+
+
+def test_symmetric_path_against_the_oracle():
+    """Defocus balanced against spherical aberration, several waves: the symmetric path at a
+    high order against the SciPy oracle (independent of the engine)."""
+    from jmse_jax._otf import _otf_overlap
+
+    coefficients = dict(w020=4.0, w040=-3.0)
+    r = np.asarray([0.05, 0.2, 0.45, 0.7, 0.93])
+    h = np.asarray(jnp.real(_otf_overlap(jj.Seidel(**coefficients), jnp.asarray(r),
+                                         jnp.zeros(r.size), 0.0, HIGH, symmetric=True)))
+    expected = np.array([oracles.otf(coefficients, x, 0.0, 0.0).real for x in r])
+    np.testing.assert_allclose(h, expected, rtol=0, atol=1e-10)
+
+
 def test_oracle_agrees_with_scipy_dblquad():
     """The oracle (rotated coordinates, Gauss inner) against plain dblquad at one node."""
     a = oracles.otf(ABERRATED, 0.0, 0.3, FIELD)
