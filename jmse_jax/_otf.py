@@ -251,8 +251,8 @@ def _exact_chords(aberrations) -> bool:
 @functools.partial(jax.checkpoint, static_argnums=(9,))
 def _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc, sides):
     """Phase difference ``W(xi + nu) - W(xi - nu)`` [waves] at the collocation points of
-    every chord, ``(N, 2 halves, n_phi, Q)`` (``nu`` in cutoff units shifts each copy of the
-    unit-radius pupil by ``nu``).
+    every chord, ``(N, halves, n_phi, Q)`` with one entry of ``halves`` per entry of ``sides``
+    (``nu`` in cutoff units shifts each copy of the unit-radius pupil by ``nu``).
 
     Under ``jax.checkpoint``: reverse mode recomputes these few polynomial evaluations
     instead of storing the wavefront's terms at every collocation point (one array of the
@@ -261,9 +261,9 @@ def _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc, sides
     ``a`` each chord's distance from the lens's mid-line and ``sin_phi`` its half-length;
     ``sides``: the lens's halves to take (the symmetric path takes one).
     """
-    # Chord points xi = side * a * e + t sin(phi) * e_perp, e_perp = (-ey, ex), on both halves.
+    # Chord points xi = side * a * e + t sin(phi) * e_perp, e_perp = (-ey, ex), on each half.
     side = jnp.asarray(sides, a.dtype)
-    along = side[None, :, None, None] * a[:, None, :, None]  # (N, 2, n_phi, 1)
+    along = side[None, :, None, None] * a[:, None, :, None]  # (N, halves, n_phi, 1)
     across = (sin_phi[:, :, None] * t_colloc[None, None, :])[:, None, :, :]  # (N, 1, n_phi, Q)
     ex4, ey4 = ex[:, None, None, None], ey[:, None, None, None]
     xi_x = along * ex4 - across * ey4
