@@ -531,8 +531,10 @@ def test_derivatives_break_the_symmetry_correctly(field):
         x, field)
     grad = np.asarray(grad)
     scale = abs(grad[0])
-    # Under differentiation the value is the plain call's, bit for bit (the one ray's).
-    assert float(value) == float(_fast_theta(x, field))
+    # Under differentiation the value is the one ray's, as in the plain call: from the
+    # gradient's own pass since 2026-12-06 (not computed a second time), so equal to
+    # rounding rather than to the bit (the fast polar grid is 3e-5 away).
+    assert float(value) == pytest.approx(float(_fast_theta(x, field)), rel=1e-14)
     for i in (0, 1, 4):
         own = oracles.richardson_difference(lambda t: _fast_theta(jnp.asarray(t), field),
                                             theta, i, 1e-4)
