@@ -164,6 +164,19 @@ def _cos_sin_2pi_jvp(primals, tangents):
     return (c, s), (-s * scale, c * scale)
 
 
+def cos_2pi(x):
+    """``cos(2 pi x)`` for a phase ``x`` in waves, one polynomial per entry:
+    ``1 - 2 sin(pi r)^2`` with ``r = x - round(x)`` (exact). The kernel of
+    ``cos_sin_2pi_stacked``, whose sine entries are the cosine at ``x - 1/4``; alone, for
+    integrands known to be even, whose sine part cancels (the overlap engine's rotationally
+    symmetric path). No derivative rule of its own: its callers differentiate through
+    ``cos_sin_2pi_stacked``, and a derivative taken through it is the polynomial's own."""
+    r = x - jnp.round(x)
+    coefficients = _SIN_PI_R_F32 if is_single_precision(x.dtype) else _SIN_PI_R
+    s = _even_poly(coefficients, r * r) * r
+    return 1.0 - 2.0 * (s * s)
+
+
 @jax.custom_jvp
 def cos_sin_2pi_stacked(x):
     """``cos(2 pi x)`` and ``sin(2 pi x)`` stacked on a new axis before the last:
@@ -179,11 +192,7 @@ def cos_sin_2pi_stacked(x):
     exact: ``2 pi (-sin, cos)``.
     """
     shift = jnp.asarray([[0.0], [0.25]], x.dtype)
-    y = x[..., None, :] - shift
-    r = y - jnp.round(y)
-    coefficients = _SIN_PI_R_F32 if is_single_precision(x.dtype) else _SIN_PI_R
-    s = _even_poly(coefficients, r * r) * r
-    return 1.0 - 2.0 * (s * s)
+    return cos_2pi(x[..., None, :] - shift)
 
 
 @cos_sin_2pi_stacked.defjvp
@@ -192,18 +201,6 @@ def _cos_sin_2pi_stacked_jvp(primals, tangents):
     e = cos_sin_2pi_stacked(x)
     rotated = jnp.stack([-e[..., 1, :], e[..., 0, :]], axis=-2)
     return e, (2.0 * math.pi) * rotated * dx[..., None, :]
-
-
-def cos_2pi(x):
-    """``cos(2 pi x)`` alone, as ``cos_sin_2pi_stacked`` computes its cosine entry: one
-    polynomial per entry, ``1 - 2 sin(pi r)^2`` with ``r = x - round(x)`` (exact). For
-    integrands known to be even, whose sine part cancels (the overlap engine's rotationally
-    symmetric path). No derivative rule of its own: its callers differentiate through
-    ``cos_sin_2pi_stacked``, and a derivative taken through it is the polynomial's own."""
-    r = x - jnp.round(x)
-    coefficients = _SIN_PI_R_F32 if is_single_precision(x.dtype) else _SIN_PI_R
-    s = _even_poly(coefficients, r * r) * r
-    return 1.0 - 2.0 * (s * s)
 
 
 def runtime_one(x):
