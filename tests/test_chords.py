@@ -1,8 +1,10 @@
 """Closed-form chord integrals (jmse_jax._chords) against SciPy and float64 brute force.
 
-The overlap engine uses them only behind the private switch ``_otf._EXACT_CHORDS`` (measured
-slower than the Gauss chords on CPU; benchmarks/README.md, optimisation log), so the engine
-test turns the switch on and compares with the Gauss path.
+The overlap engine uses the general form (``chord_integral``) only behind the private switch
+``_otf._EXACT_CHORDS`` (measured slower than the Gauss chords on CPU; benchmarks/README.md,
+optimisation log), so the engine test turns the switch on and compares with the Gauss path.
+The even form (``even_chord_integral``) is what the engine's rotationally symmetric path
+(the one-ray plans) uses for Seidel wavefronts; its engine checks are in ``test_otf.py``.
 """
 
 from __future__ import annotations
@@ -171,3 +173,87 @@ def test_engine_with_exact_chords_matches_gauss(monkeypatch, coefficients):
     assert np.max(np.abs(h_exact - h_gauss)) < 1e-13
     assert np.all(np.isfinite(g_exact))
     np.testing.assert_allclose(g_exact, g_gauss, rtol=1e-9, atol=1e-11)
+
+
+def _even_cases():
+    """(p0, gamma) in waves: gamma over 14 decades of both signs, the series' end
+    (|gamma| = 1) and zero, p0 over 60 waves."""
+    rng = np.random.default_rng(11)
+    gamma = np.concatenate([
+        rng.uniform(-300.0, 300.0, 400), rng.uniform(-1.5, 1.5, 400),
+        10.0 ** rng.uniform(-12, 2.5, 400) * rng.choice([-1.0, 1.0], 400),
+        [0.0, 1.0, -1.0, 1.0 + 1e-15, 1.0 - 1e-15, 1e-300],
+    ])
+    return rng.uniform(-30.0, 30.0, gamma.size), gamma
+
+
+def test_even_chord_integral_matches_fresnel():
+    """``Re int_{-1}^{1} exp(i 2 pi (p0 + gamma t^2)) dt = 2 Re[e^{i 2 pi p0} F(gamma)]`` with
+    ``F(gamma) = (C(x) + i S(x)) / x``, ``x = 2 sqrt|gamma|`` (SciPy's Fresnel integrals,
+    ``F(-gamma) = conj F(gamma)``)."""
+    p0, gamma = _even_cases()
+    x = 2.0 * np.sqrt(np.abs(gamma))
+    s, c = fresnel(x)
+    f = np.where(x > 0, (c + 1j * s) / np.where(x > 0, x, 1.0), 1.0)
+    f = np.where(gamma < 0, np.conj(f), f)
+    expected = 2.0 * np.real(np.exp(2j * np.pi * p0) * f)
+    got = jax.jit(_chords.even_chord_integral)(jnp.asarray(p0), jnp.asarray(p0 + gamma))
+    assert np.max(np.abs(np.asarray(got) - expected)) < 3e-13
+
+
+def test_even_chord_integral_derivatives_against_brute_force():
+    """First derivatives in both phases against composite Gauss sums of the differentiated
+    integrand (``d/dp1 = Re int 2 pi i t^2 e^{i phi}``, ``d/dp0 = Re int 2 pi i (1 - t^2)
+    e^{i phi}``); the Hessian finite everywhere and its ``p1 p1`` entry equal to central
+    differences of the gradient."""
+    p0, gamma = _even_cases()
+    keep = np.abs(gamma) < 120  # the brute-force rule resolves up to ~120 waves
+    p0, gamma = p0[keep], gamma[keep]
+    t, w = _composite_gauss()
+    e = np.exp(2j * np.pi * (p0[:, None] + gamma[:, None] * t * t))
+    d1 = np.real((2j * np.pi * e * t * t) @ w)
+    d0 = np.real((2j * np.pi * e * (1.0 - t * t)) @ w)
+    a, b = jnp.asarray(p0), jnp.asarray(p0 + gamma)
+    grad = jax.jit(jax.vmap(jax.grad(_chords.even_chord_integral, (0, 1))))
+    g0, g1 = grad(a, b)
+    assert np.max(np.abs(np.asarray(g0) - d0)) < 1e-12
+    assert np.max(np.abs(np.asarray(g1) - d1)) < 1e-12
+    hess = jax.jit(jax.vmap(jax.hessian(_chords.even_chord_integral, (0, 1))))(a, b)
+    assert all(np.all(np.isfinite(np.asarray(h))) for h in jax.tree_util.tree_leaves(hess))
+    step = 1e-6
+    fd = (grad(a, b + step)[1] - grad(a, b - step)[1]) / (2 * step)
+    away = np.abs(np.abs(gamma) - 1.0) > 2 * step  # the two forms meet at |gamma| = 1
+    np.testing.assert_allclose(np.asarray(hess[1][1])[away], np.asarray(fd)[away],
+                               rtol=1e-7, atol=1e-6)
+
+
+def test_even_chord_series_host_functions():
+    """The host functions the series are fitted to: ``F`` on ``|gamma| <= 1`` against SciPy,
+    and ``h`` against its definition through ``F``, ``h(x) = (4 pi gamma / i)
+    e^{-i 2 pi gamma} ((1 + i) / (4 sqrt gamma) - F(gamma))``, ``x = 1 / (2 pi gamma)``."""
+    gamma = np.linspace(0.01, 1.0, 37)
+    x = 2.0 * np.sqrt(gamma)
+    s, c = fresnel(x)
+    np.testing.assert_allclose(_chords.even_f_host(gamma), (c + 1j * s) / x, rtol=0, atol=5e-15)
+    gamma = np.linspace(1.0, 40.0, 41)
+    x = 2.0 * np.sqrt(gamma)
+    s, c = fresnel(x)
+    f = (c + 1j * s) / x
+    tail = (1 + 1j) / (4 * np.sqrt(gamma)) - f
+    h = (4 * np.pi * gamma / 1j) * np.exp(-2j * np.pi * gamma) * tail
+    # The right side loses ~4 pi gamma of F's absolute accuracy (about 1e-16).
+    np.testing.assert_allclose(_chords.h_host(1.0 / (2 * np.pi * gamma)), h, rtol=0,
+                               atol=1e-15 * 4 * np.pi * gamma.max() * 4)
+    assert abs(_chords.h_host(np.asarray(0.0)) - 1.0) < 1e-15
+
+
+def test_even_chord_integral_float32():
+    """In float32 the even chords keep float32's accuracy (phases of a few waves)."""
+    rng = np.random.default_rng(5)
+    p0 = rng.uniform(-3.0, 3.0, 500).astype(np.float32)
+    p1 = (p0 + rng.uniform(-20.0, 20.0, 500)).astype(np.float32)
+    got = jax.jit(_chords.even_chord_integral)(jnp.asarray(p0), jnp.asarray(p1))
+    assert got.dtype == jnp.float32
+    expected = _chords.even_chord_integral(jnp.asarray(p0, jnp.float64),
+                                           jnp.asarray(p1, jnp.float64))
+    assert np.max(np.abs(np.asarray(got, np.float64) - np.asarray(expected))) < 2e-5
