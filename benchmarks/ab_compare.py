@@ -11,13 +11,20 @@ fastest time. Each version is a checkout, e.g. a ``git worktree`` of the older c
         --presets fast,default --modes value,vag
 
 ``taskset -c 1`` (one core) gives steadier figures than two cores shared with the host.
-Problems are the test bank's (``tests/problems.py``); values are printed to 16 digits next
-to the times, so a change that should only round can be checked at the same time.
+Problems are the test bank's (``tests/problems.py``), or a design of one's own with
+``--design`` (Seidel coefficients, field, u and noise over the bank problem's)::
+
+    taskset -c 1 python benchmarks/ab_compare.py /tmp/old . --presets default \
+        --design '{"w020": -6, "field": 0, "u": 0.5, "noise": 1e-2}'
+
+Values are printed to 16 digits next to the times, so a change that should only round can be
+checked at the same time.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
 import json
 import os
@@ -51,7 +58,28 @@ def _parse_args(argv=None):
                         help='jmse keyword overrides as JSON, e.g. \'{"nodes": [24, 12]}\'')
     parser.add_argument("--dtype", default="float64", choices=("float64", "float32"),
                         help="dtype of the problem's numbers, hence of the computation")
+    parser.add_argument("--design", default=None,
+                        help="JSON: Seidel coefficients (w020, w040, w131, w222, w220, w311, "
+                             "w111) and field, u, noise, replacing the problem's")
     return parser.parse_args(argv)
+
+
+def _problem(name, design):
+    """The bank problem ``name``, with the entries of the JSON object ``design`` (Seidel
+    coefficients, ``field``, ``u``, ``noise``) in place of its own."""
+    problem = PROBLEMS_BY_NAME[name]
+    if design is None:
+        return problem
+    given = json.loads(design)
+    scalars = {"field": "field", "u": "u", "noise": "noise_variance"}
+    unknown = set(given) - set(scalars) - {"w020", "w040", "w131", "w222", "w220", "w311",
+                                           "w111"}
+    if unknown:
+        raise SystemExit(f"--design: unknown entries {sorted(unknown)}")
+    coefficients = {k: v for k, v in given.items() if k not in scalars}
+    return dataclasses.replace(
+        problem, name=f"{name} with {design}", coefficients=coefficients or problem.coefficients,
+        **{scalars[k]: float(v) for k, v in given.items() if k in scalars})
 
 
 def _load(checkouts):
@@ -83,7 +111,7 @@ def _rebuild(obj, module, dtype="float64"):
 
 def main(argv=None):
     args = _parse_args(argv)
-    problem = PROBLEMS_BY_NAME[args.problem]
+    problem = _problem(args.problem, args.design)
     modules = _load(args.checkouts)
     presets, modes = args.presets.split(","), args.modes.split(",")
     options = {k: tuple(v) if isinstance(v, list) else v
@@ -115,7 +143,7 @@ def main(argv=None):
                 start = time.perf_counter()
                 jax.block_until_ready(fn(w))
                 best[key] = min(best[key], time.perf_counter() - start)
-    print(f"{args.problem} ({args.dtype}): fastest of {args.rounds} x {args.calls} calls "
+    print(f"{problem.name} ({args.dtype}): fastest of {args.rounds} x {args.calls} calls "
           "per version")
     for preset in presets:
         for mode in modes:
