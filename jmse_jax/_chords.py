@@ -1,9 +1,12 @@
 """Exact chord integrals ``J = \\int_{-1}^{1} exp(i 2 pi p(t)) dt`` for quadratic phases ``p``.
 
-Not used by default: the overlap engine calls it only when ``_otf._EXACT_CHORDS`` is set. On
-the 2-core CPU it measured as fast as the Gauss chords for the value and 35-50 % slower for
-``value_and_grad`` (benchmarks/README.md, optimisation log); it is kept, tested, for devices
-where the balance may differ.
+The general form (``chord_integral``) is not used by default: the overlap engine calls it
+only when ``_otf._EXACT_CHORDS`` is set. When it was written it measured as fast as the Gauss
+chords for the value and 35-50 % slower for ``value_and_grad``; the Gauss chords have got
+faster since, and in session 99 it was 1.3-5x slower (one core: the default's first grid
+0.50 -> 2.55 ms a value, tier 3's grid 71 -> 89 ms; benchmarks/README.md, optimisation log).
+It is kept, tested, for devices where the balance may differ. The even form
+(``even_chord_integral``, below) is used: the one-ray plans' chords.
 
 Along the chords of the overlap lens that run perpendicular to ``nu``, the phase difference
 ``W(xi + nu) - W(xi - nu)`` of a Seidel wavefront is a quadratic in the chord parameter ``t``

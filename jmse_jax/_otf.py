@@ -17,7 +17,7 @@ Engines
     aberration-free OTF is exact to rounding at any order.
     (A closed form for each chord's ``t`` integral, exact when the phase is quadratic along
     the chords as for Seidel wavefronts, is in ``_chords``. In general it is off,
-    ``_EXACT_CHORDS``, because on CPU it measured no faster; on the rotationally symmetric
+    ``_EXACT_CHORDS``, because on CPU it measured slower; on the rotationally symmetric
     path, whose chords' phases are even, its one-parameter form is 2-4x faster than the
     Gauss chords and is used.)
 ``"nudft"``
