@@ -18,7 +18,7 @@ Engines
     (A closed form for each chord's ``t`` integral, exact when the phase is quadratic along
     the chords as for Seidel wavefronts, is in ``_chords``. In general it is off,
     ``_EXACT_CHORDS``, because on CPU it measured slower; on the rotationally symmetric
-    path, whose chords' phases are even, its one-parameter form is 2-4x faster than the
+    path, whose chords' phases are even, its one-parameter form is 1.6-4x faster than the
     Gauss chords and is used.)
 ``"nudft"``
     Pupil on a ``B x B`` square grid, PSF by a ``2B``-padded FFT, then the OTF at each node by
