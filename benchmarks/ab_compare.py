@@ -72,8 +72,8 @@ def _problem(name, design):
         return problem
     given = json.loads(design)
     scalars = {"field": "field", "u": "u", "noise": "noise_variance"}
-    unknown = set(given) - set(scalars) - {"w020", "w040", "w131", "w222", "w220", "w311",
-                                           "w111"}
+    seidel = {f.name for f in dataclasses.fields(problem.aberrations())}
+    unknown = set(given) - set(scalars) - seidel
     if unknown:
         raise SystemExit(f"--design: unknown entries {sorted(unknown)}")
     coefficients = {k: v for k, v in given.items() if k not in scalars}

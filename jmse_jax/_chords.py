@@ -80,7 +80,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.polynomial import chebyshev as _cheb
 
-from ._numerics import cos_sin_2pi, gauss_legendre, materialise, runtime_one
+from ._numerics import _even_poly, cos_sin_2pi, gauss_legendre, materialise, runtime_one
 
 __all__ = ["chord_integral", "even_chord_integral"]
 
@@ -376,14 +376,9 @@ def _power_series(fn, degree):
     """Coefficients, lowest first, of the degree-``degree`` Chebyshev interpolant of ``fn`` on
     ``u`` in [0, 1], written in powers of ``u`` (for Horner's rule; they stay of order 10
     here, so little is lost to cancellation)."""
-    nodes = np.cos(np.pi * (np.arange(4 * degree) + 0.5) / (4 * degree))
-    cheb = _cheb.chebfit(nodes, fn(0.5 * (nodes + 1.0)), degree)
-    in_x = _cheb.cheb2poly(cheb)  # powers of x = 2 u - 1
-    result = np.zeros(1)
-    for k, a in enumerate(in_x):
-        result = np.polynomial.polynomial.polyadd(
-            result, a * np.polynomial.polynomial.polypow([-1.0, 2.0], k))
-    return tuple(float(c) for c in result)
+    u = 0.5 * (np.cos(np.pi * (np.arange(4 * degree) + 0.5) / (4 * degree)) + 1.0)
+    series = np.polynomial.Chebyshev.fit(u, fn(u), degree, domain=[0.0, 1.0])
+    return tuple(float(c) for c in series.convert(kind=np.polynomial.Polynomial).coef)
 
 
 @functools.cache
@@ -403,13 +398,6 @@ def _even_series():
     )
 
 
-def _horner(coefficients, u):
-    result = jnp.full_like(u, coefficients[-1])
-    for c in coefficients[-2::-1]:
-        result = result * u + c
-    return result
-
-
 def _even_parts(p0, p1):
     """``Z = e^{i 2 pi p0} F(p1 - p0)`` as ``(re, im)``, and what the derivative rule needs."""
     # Stored once: XLA would otherwise recompute the chord phases (a polynomial in the
@@ -426,14 +414,14 @@ def _even_parts(p0, p1):
     inv_sqrt = jax.lax.rsqrt(jnp.where(big, jnp.abs(gamma), 1.0))
     u = inv_sqrt * inv_sqrt  # 1 / |gamma|
     half_x = u * (0.25 / math.pi)
-    a = half_x * _horner(h_im, u)
-    b = -sign * half_x * _horner(h_re, u)
+    a = half_x * _even_poly(h_im, u)
+    b = -sign * half_x * _even_poly(h_re, u)
     quarter = 0.25 * inv_sqrt
     re_big = quarter * (c0 - sign * s0) + (c1 * a - s1 * b)
     im_big = quarter * (s0 + sign * c0) + (s1 * a + c1 * b)
     # |gamma| <= 1: Z = e^{i 2 pi p0} (p(v) + i gamma q(v)).
     v = jnp.where(big, 0.0, gamma * gamma)
-    f_re, f_im = _horner(p, v), gamma * _horner(q, v)
+    f_re, f_im = _even_poly(p, v), gamma * _even_poly(q, v)
     re = jnp.where(big, re_big, c0 * f_re - s0 * f_im)
     im = jnp.where(big, im_big, s0 * f_re + c0 * f_im)
     return re, im, (gamma, big, v, c0, s0, c1)
@@ -458,7 +446,7 @@ def _even_chord_integral_jvp(primals, tangents):
     # Re e^{i 2 pi p0} F'(gamma): (cos 2 pi p1 - Re Z) / (2 gamma) for |gamma| > 1, the
     # series' own derivative below.
     far = (c1 - re) / (2.0 * jnp.where(big, gamma, 1.0))
-    near = c0 * (gamma * _horner(r, v)) - s0 * _horner(s, v)
+    near = c0 * (gamma * _even_poly(r, v)) - s0 * _even_poly(s, v)
     slope = jnp.where(big, far, near)
     # value 2 Re Z: d/dp1 = 2 Re(e F'), d/dp0 = -4 pi Im Z - 2 Re(e F').
     return 2.0 * re, 2.0 * slope * (d1 - d0) - (4.0 * math.pi) * im * d0
