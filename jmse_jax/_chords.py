@@ -1,64 +1,20 @@
-"""Exact chord integrals ``J = \\int_{-1}^{1} exp(i 2 pi p(t)) dt`` for quadratic phases ``p``.
-
-The general form (``chord_integral``) is not used by default: the overlap engine calls it
-only when ``_otf._EXACT_CHORDS`` is set. When it was written it measured as fast as the Gauss
-chords for the value and 35-50 % slower for ``value_and_grad``; the Gauss chords have got
-faster since, and in session 99 it was 1.3-5x slower (one core: the default's first grid
-0.50 -> 2.55 ms a value, tier 3's grid 71 -> 89 ms; benchmarks/README.md, optimisation log).
-It is kept, tested, for devices where the balance may differ. The even form
-(``even_chord_integral``, below) is used: the one-ray plans' chords.
+"""Closed-form chord integrals ``J = \\int_{-1}^{1} exp(i 2 pi p(t)) dt`` for quadratic phases.
 
 Along the chords of the overlap lens that run perpendicular to ``nu``, the phase difference
-``W(xi + nu) - W(xi - nu)`` of a Seidel wavefront is a quadratic in the chord parameter ``t``
-(its only quartic term, ``rho^4``, is rotationally symmetric). The ``t`` integral then has a
-closed form in terms of one smooth special function, and the overlap engine needs one such
-evaluation per chord instead of a Gauss rule of 20-60 nodes whose cost grows with the phase
-spread across the lens.
+``W(xi + nu) - W(xi - nu)`` of a Seidel wavefront (or of Zernike terms up to ``Z11``) is a
+quadratic in the chord parameter ``t``. Each chord's ``t`` integral then has a closed form
+in one special function,
 
-Derivation (phase ``phi(t) = c + b t + g t^2`` in radians, ``g >= 0``; ``g < 0`` follows from
-``J(p) = conj(J(-p))``). With ``A(beta, g) = \\int_0^inf exp(i (beta s + g s^2)) ds``, the
-integral from each end point to infinity of the local quadratic,
+    F(gamma) = \\int_0^1 exp(i 2 pi gamma s^2) ds,     F(-gamma) = conj F(gamma),
 
-    J = e^{i phi(-1)} A(phi'(-1), g) - e^{i phi(1)} A(phi'(1), g),
+which replaces a Gauss rule along the chord. Two forms use it.
 
-and ``A(beta, g) = g^{-1/2} Ahat(beta / sqrt(g))``, ``Ahat(y) = \\int_0^inf e^{i (y s + s^2)} ds``.
-For ``y < 0``, ``Ahat(y) = sqrt(pi) e^{i pi/4} e^{-i y^2/4} - Ahat(|y|)``; the first part is the
-stationary point's contribution, which survives only when the stationary point
-``t* = -b / (2 g)`` lies inside the chord. So, with ``T(beta, g) = sign(beta) g^{-1/2}
-Ahat(|beta| / sqrt(g))``,
-
-    J = e^{i phi(-1)} T(phi'(-1)) - e^{i phi(1)} T(phi'(1))
-        + [phi'(-1) < 0 <= phi'(1)] sqrt(pi / g) e^{i pi/4} e^{i phi(t*)}.
-
-``Ahat`` on ``y >= 0`` is smooth and bounded (``Ahat(0) = sqrt(pi) e^{i pi/4} / 2``,
-``Ahat(y) ~ i / y``); it is tabulated once as a Chebyshev series on ``[0, Y]``. Beyond ``Y``
-the form ``T = (i / beta) K(g / beta^2)``, ``K(eps) = -i y Ahat(y)`` at ``y = eps^{-1/2}``
-(``K(0) = 1``), has no ``1/sqrt(g)`` at all and stays exact as ``g -> 0`` (the linear-phase
-limit ``(e^{i phi(1)} - e^{i phi(-1)}) / (i b)``); ``K`` is a second Chebyshev series on
-``[0, 1/Y^2]``. Both series are built on the host from the contour integrals
-
-    Ahat(y) = e^{i pi/4} \\int_0^inf exp(-r^2 - y e^{-i pi/4} r) dr,
-    K(eps)  = -i e^{i pi/4} \\int_0^inf exp(-eps s^2 - e^{-i pi/4} s) ds
-
-(the path rotated by 45 degrees, where the integrands decay without oscillating), by
-composite Gauss–Legendre in float64, accurate to about 1e-15.
-
-When the phase hardly varies along the chord (``g`` and one end point's slope both small),
-the two end-point terms are large and nearly cancel; there a 7-node Gauss rule is exact to
-rounding instead.
-
-The derivative rule is written by hand (``Ahat' = -(1 + i y Ahat) / 2`` and a series of
-``K'`` tabulated the same way) and stays finite at every degenerate point (``g = 0``,
-``b = 0``, the stationary point at an end). It needs the third series and about four times
-the work of the value.
-
-Even chords (``even_chord_integral``; used by default). On the overlap engine's rotationally
-symmetric path the phase along each chord is even, ``p(t) = p0 + gamma t^2`` (waves), and the
-chord's integral is ``2 e^{i 2 pi p0} F(gamma)`` with the one-parameter function
-``F(gamma) = \\int_0^1 exp(i 2 pi gamma s^2) ds`` (``F(-gamma) = conj F(gamma)``). For
-``|gamma| <= 1`` it is a power series, ``F = P(gamma^2) + i gamma Q(gamma^2)``, economised to
-degree 12 in ``gamma^2``. For ``|gamma| > 1`` the tail from 1 to infinity, rotated onto the
-path ``v = i w / (2 pi gamma)`` of ``s^2 = 1 + v``, leaves
+Even chords (``even_chord_integral``; the one-ray plans, since session 99). On the overlap
+engine's rotationally symmetric path the phase along each chord is even, ``p(t) = p0 +
+gamma t^2`` (waves), and the chord's integral is ``2 e^{i 2 pi p0} F(gamma)``. For
+``|gamma| <= 1``, ``F`` is a power series, ``F = P(gamma^2) + i gamma Q(gamma^2)``, economised
+to degree 12 in ``gamma^2``. For ``|gamma| > 1`` the tail from 1 to infinity, rotated onto
+the path ``v = i w / (2 pi gamma)`` of ``s^2 = 1 + v``, leaves
 
     F(gamma) = (1 + i) / (4 sqrt(gamma)) - e^{i 2 pi gamma} (i x / 2) h(x),
     h(x) = \\int_0^inf e^{-w} (1 + i x w)^{-1/2} dw,   x = 1 / (2 pi gamma) <= 1 / (2 pi),
@@ -68,6 +24,52 @@ then costs two phase factors (at ``t = 0`` and ``t = 1``), one reciprocal square
 three short polynomials, about as much as 15-20 Gauss nodes, whatever ``gamma``; its
 derivative is nearly free, ``F' = (e^{i 2 pi gamma} - F) / (2 gamma)`` (and the series'
 own derivative for ``|gamma| <= 1``). Absolute error about 1e-14.
+
+General chords (``chord_integral``; the overlap engine's strong grids, since session 100).
+For ``p(t) = p0 + b t + g t^2`` complete the square about the stationary point ``t* = -b /
+(2 g)``: with ``c = p(t*)``, the end ``e = +-1``, its slope ``s_e = p'(e) = b + 2 g e`` and
+``L_e = e - t* = s_e / (2 g)``,
+
+    J = T_{+1} - T_{-1},   T_e = e^{i 2 pi c} L_e F(gamma_e),   gamma_e = g L_e^2 = s_e^2 / (4 g).
+
+- An end far from ``t*`` (``|gamma_e| >= 1``, i.e. ``s_e^2 >= 4 |g|``) takes ``F``'s
+  large-``gamma`` form. Its ``1 / sqrt`` part is ``sign(L_e) Q``, ``Q = e^{i 2 pi c} (1 + i
+  sgn g) / (4 sqrt|g|)``, and the rest is ``A_e = e^{i 2 pi p(e)} (-i / (2 pi s_e))
+  h_sigma(4 |g| / s_e^2)`` (``h_sigma = h``, or ``conj h`` for ``g < 0``): no ``c`` and no
+  ``1 / g``, so it stays exact as ``g -> 0`` (``A_e -> e^{i 2 pi p(e)} / (i 2 pi s_e)``, the
+  linear phase's end term). When both ends are far and ``t*`` lies outside the chord, the
+  two ``Q`` parts cancel exactly and ``J = A_{+1} - A_{-1}``; with ``t*`` inside they add to
+  ``2 Q``, the stationary point's contribution.
+- An end near ``t*`` (``|gamma_e| < 1``) takes ``F``'s power series, ``T_e = e^{i 2 pi c} L_e
+  F(gamma_e)``; its ``Q`` part is then inside ``T_e``, and the far end (if any) adds its
+  own.
+- Where ``|g| <= 0.005`` and ``|b| <= 0.152`` (waves), near-end terms of size up to ``1 /
+  sqrt|g|`` would cancel to a result of order 1, so ``J`` is a Taylor polynomial in ``(b,
+  g)`` there instead (``_taylor_tables``: ``e^{i 2 pi p0}`` times about 60 terms). Outside
+  the rectangle a near end needs ``|b| < 2 sqrt|g| + 2 |g|``, so ``|g| > 0.005`` and the
+  terms stay below about 14.
+
+A chord costs three phase factors (at both ends and at ``t*``), two of each series and the
+Taylor polynomial, all evaluated and selected: about 65 ns per chord on one core of the
+2-core AMD EPYC host, against about 1.5 ns per Gauss node in place, so it pays from about
+64 nodes along the chords (``_otf._CLOSED_FORM_ORDER``; benchmarks/README.md, optimisation
+log, session 100). The series of ``h`` here has degree 16 (error 4e-14), since an end term
+carries it with the factor ``1 / (2 pi s_e)``, up to about 1.
+
+The derivative rule needs the moments ``M_q = \\int t^q e^{i 2 pi p} dt`` (``dJ = i 2 pi
+(J dp0 + M1 db + M2 dg)``):
+- with both ends far and ``t*`` outside, from ``A_e``'s own derivatives, through a series of
+  ``h'`` (degree 20);
+- in the Taylor rectangle, from two more Taylor polynomials;
+- elsewhere (``g`` is then away from 0), from the integration-by-parts identities ``b J + 2 g
+  M1 = (e^{i 2 pi p(1)} - e^{i 2 pi p(-1)}) / (i 2 pi)`` and ``b M1 + 2 g M2 =
+  (e^{i 2 pi p(1)} + e^{i 2 pi p(-1)} - J) / (i 2 pi)``, which lose up to a factor of about
+  ``(|b| / |g|)^2``: derivatives within about 1e-10 absolute next to the rectangle, 1e-13
+  elsewhere; values within 1e-13 everywhere (tests/test_chords.py).
+
+Every branch is evaluated at a harmless stand-in where it is not selected, so values,
+derivatives and second derivatives stay finite at the degenerate points (``g = 0``, ``b =
+0``, ``t*`` at an end, the branches' borders).
 """
 
 from __future__ import annotations
@@ -78,28 +80,10 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
-from numpy.polynomial import chebyshev as _cheb
 
 from ._numerics import _even_poly, cos_sin_2pi, gauss_legendre, materialise, runtime_one
 
 __all__ = ["chord_integral", "even_chord_integral"]
-
-#: ``|y| = |beta| / sqrt(g)`` below which ``Ahat`` is used, above which ``K``.
-_Y = 6.0
-_A_DEGREE = 26
-_K_DEGREE = 20
-#: The small-phase branch (radians): ``g < _G_SMALL`` and an end-point slope ``< _B_SMALL``.
-#: There ``|phi(t) - phi(-1)| <= 0.32`` rad over the chord, and the 7-node Gauss rule is exact
-#: to rounding. Outside it the closed form's values are
-#: exact to ~1e-13 absolute; its derivatives to ~1e-11, and to ~1e-9 for chords just outside
-#: the branch (``g ~ 1e-2``), where the end-point terms' cancellation amplifies the inputs'
-#: rounding (tests/test_chords.py measures both).
-_G_SMALL = 1e-2
-_B_SMALL = 0.1
-_SMALL_NODES = 7
-
-_SQRT_PI = math.sqrt(math.pi)
-_E_PI4 = complex(math.cos(math.pi / 4), math.sin(math.pi / 4))
 
 
 def _composite_gauss(a, b, panels, order):
@@ -107,80 +91,6 @@ def _composite_gauss(a, b, panels, order):
     edges = np.linspace(a, b, panels + 1)
     h = np.diff(edges)
     return ((edges[:-1, None] + h[:, None] * x).ravel(), (h[:, None] * w).ravel())
-
-
-def ahat_host(y):
-    """``Ahat(y) = \\int_0^inf exp(i (y s + s^2)) ds`` for ``y >= 0`` (NumPy, float64)."""
-    y = np.asarray(y, float)
-    r, w = _composite_gauss(0.0, 8.0, 64, 24)
-    rot = np.exp(-0.25j * np.pi)
-    values = np.exp(-(r * r)[None, :] - (y.reshape(-1, 1) * rot) * r[None, :]) @ w
-    return (np.exp(0.25j * np.pi) * values).reshape(y.shape)
-
-
-def k_host(eps, derivative=False):
-    """``K(eps) = -i y Ahat(y)`` at ``y = eps^{-1/2}`` (``K(0) = 1``), ``eps >= 0``, or its
-    derivative ``K'(eps)`` (NumPy, float64)."""
-    eps = np.asarray(eps, float)
-    s, w = _composite_gauss(0.0, 64.0, 128, 24)
-    if derivative:
-        w = -w * s * s
-    rot = np.exp(-0.25j * np.pi)
-    values = np.exp(-eps.reshape(-1, 1) * (s * s)[None, :] - rot * s[None, :]) @ w
-    return (-1j * np.exp(0.25j * np.pi) * values).reshape(eps.shape)
-
-
-@functools.cache
-def _series():
-    """Chebyshev coefficients (real, imag) of ``(1 + y) Ahat`` on [0, Y], ``K`` and ``K'`` on
-    [0, 1/Y^2]."""
-    eps_max = 1.0 / (_Y * _Y)
-
-    def coefficients(fn, lo, hi, degree):
-        x = np.cos(np.pi * (np.arange(degree + 1) + 0.5) / (degree + 1))
-        values = fn(lo + (hi - lo) * 0.5 * (x + 1.0))
-        return _cheb.chebfit(x, values.real, degree), _cheb.chebfit(x, values.imag, degree)
-
-    # (1 + y) Ahat, so that the series is accurate relative to Ahat's size (~ 1/y).
-    a_re, a_im = coefficients(lambda y: (1 + y) * ahat_host(y), 0.0, _Y, _A_DEGREE)
-    k_re, k_im = coefficients(k_host, 0.0, eps_max, _K_DEGREE)
-    # K' is fitted from its own integral (differentiating K's series would lose ~3 digits).
-    kp_re, kp_im = coefficients(functools.partial(k_host, derivative=True), 0.0, eps_max,
-                                _K_DEGREE)
-    as_tuple = lambda c: tuple(float(v) for v in c)  # noqa: E731
-    return tuple(as_tuple(c) for c in (a_re, a_im, k_re, k_im, kp_re, kp_im))
-
-
-def _clenshaw(x, c_re, c_im):
-    """Chebyshev series with real coefficient lists ``c_re``, ``c_im`` at ``x`` in [-1, 1]."""
-    two_x = 2.0 * x
-    zero = jnp.zeros_like(x)
-    b1r = b2r = b1i = b2i = zero
-    for cr, ci in zip(c_re[:0:-1], c_im[:0:-1], strict=True):
-        b1r, b2r = two_x * b1r - b2r + cr, b1r
-        b1i, b2i = two_x * b1i - b2i + ci, b1i
-    return x * b1r - b2r + c_re[0], x * b1i - b2i + c_im[0]
-
-
-def _ahat(y):
-    """``Ahat(y)`` on [0, Y]."""
-    c_re, c_im, *_ = _series()
-    re, im = _clenshaw(y * (2.0 / _Y) - 1.0, c_re, c_im)
-    # A division (not a multiplication by the reciprocal): XLA counts it as expensive and
-    # then computes the series once instead of fusing (recomputing) it into every consumer.
-    return re / (1.0 + y), im / (1.0 + y)
-
-
-def _k(eps, derivative):
-    _, _, k_re, k_im, kp_re, kp_im, *_ = _series()
-    x = eps * (2.0 * _Y * _Y) - 1.0
-    return _clenshaw(x, kp_re, kp_im) if derivative else _clenshaw(x, k_re, k_im)
-
-
-@functools.cache
-def _small_rule():
-    t, w = gauss_legendre(_SMALL_NODES, -1.0, 1.0)
-    return tuple(float(v) for v in t), tuple(float(v) for v in w)
 
 
 class _C:
@@ -211,135 +121,6 @@ class _C:
     def where(self, cond, other):
         """``self`` where ``cond``, else ``other``."""
         return _C(jnp.where(cond, self.re, other.re), jnp.where(cond, self.im, other.im))
-
-
-def _endpoint(beta, g, derivatives):
-    """``T(beta, g)`` and, if asked, ``dT/dbeta``, ``dT/dg`` (``g >= 0``)."""
-    abs_b = jnp.abs(beta)
-    sq = jnp.sqrt(g)
-    use_a = abs_b < _Y * sq  # False whenever g == 0
-    # Ahat branch (safe stand-ins where not selected: g > 0 there).
-    g_a = jnp.where(use_a, g, 1.0)
-    sq_a = jnp.where(use_a, sq, 1.0)
-    y = jnp.where(use_a, abs_b / sq_a, 0.0)
-    sign = jnp.where(beta < 0, -1.0, 1.0)
-    a = _C(*_ahat(y))
-    # K branch (beta != 0 there; stand-in 1 elsewhere).
-    b_k = jnp.where(use_a, 1.0, beta)
-    inv_b = 1.0 / b_k
-    eps = jnp.where(use_a, 0.0, g * inv_b * inv_b)
-    # Divisions, not multiplications by 1/beta: see _ahat.
-    k = _C(*_k(eps, False))
-    kb = _C(k.re / b_k, k.im / b_k)  # K / beta
-    t = (a * (sign / sq_a)).where(use_a, kb.times_i())
-    if not derivatives:
-        return t, None, None
-    kp = _C(*_k(eps, True))
-    kpb = _C(kp.re / b_k, kp.im / b_k)  # K' / beta
-    # Ahat' = -(1 + i y Ahat) / 2 and D = (y Ahat)' = Ahat + y Ahat' (both lose up to y^2 <= 36
-    # in relative accuracy: about 1e-9 absolute on dT/dg in the worst, near-degenerate case).
-    iya = a.times_i() * y
-    ap = _C(-0.5 * (1.0 + iya.re), -0.5 * iya.im)
-    d = a + ap * y
-    dt_db_a = ap * (1.0 / g_a)
-    dt_dg_a = d * (-0.5 * sign / (g_a * sq_a))
-    dt_db_k = (kb + kpb * (2.0 * eps)).times_i() * -inv_b
-    dt_dg_k = kpb.times_i() * (inv_b * inv_b)
-    return t, dt_db_a.where(use_a, dt_db_k), dt_dg_a.where(use_a, dt_dg_k)
-
-
-def _chord(pm, p0, pp, derivatives):
-    """``J`` (and ``dJ/db``, ``dJ/dg``) for phases in waves at ``t = -1, 0, 1``."""
-    pm, p0, pp = materialise(pm, p0, pp)
-    c2_waves = 0.5 * (pp + pm) - p0
-    flip = c2_waves < 0
-    sgn = jnp.where(flip, -1.0, 1.0)
-    pm, p0, pp = sgn * pm, sgn * p0, sgn * pp
-    two_pi = 2.0 * math.pi
-    c1 = 0.5 * (pp - pm)
-    c2 = jnp.abs(c2_waves)
-    b, g = two_pi * c1, two_pi * c2
-    beta1, beta2 = b - 2.0 * g, b + 2.0 * g
-    one = runtime_one(g)  # dividing by it makes XLA store a value once (see materialise)
-    e1 = _C(*(v / one for v in cos_sin_2pi(pm)))
-    e2 = _C(*(v / one for v in cos_sin_2pi(pp)))
-
-    small = (g < _G_SMALL) & (jnp.minimum(jnp.abs(beta1), jnp.abs(beta2)) < _B_SMALL)
-    # Closed form (stand-ins on the small branch keep it finite).
-    g_c = jnp.where(small, 1.0, g)
-    t1, t1_b, t1_g = _endpoint(beta1, g_c, derivatives)
-    t2, t2_b, t2_g = _endpoint(beta2, g_c, derivatives)
-    # beta = 0 counts as positive in T (sign +1), so a stationary point exactly at t = 1
-    # (beta2 = 0) is inside and one at t = -1 (beta1 = 0) is not: J stays continuous.
-    inside = (beta1 < 0) & (beta2 >= 0) & ~small
-    g_s = jnp.where(inside, g_c, 1.0)
-    t_star = jnp.where(inside, -c1 / (2.0 * jnp.where(inside, c2, 1.0)), 0.0)
-    phase_star = p0 + 0.5 * c1 * t_star  # = p0 - c1^2 / (4 c2)
-    es = _C(*(v / one for v in cos_sin_2pi(phase_star)))
-    s = (es * _C(_SQRT_PI * _E_PI4.real, _SQRT_PI * _E_PI4.imag)) * jnp.where(
-        inside, 1.0 / jnp.sqrt(g_s), 0.0)
-    e1t1, e2t2 = e1 * t1, e2 * t2
-    j_closed = e1t1 - e2t2 + s
-
-    # Small-phase branch: expand about t = -1.
-    nodes, weights = _small_rule()
-    beta1_s = jnp.where(small, beta1, 0.0)
-    g_sm = jnp.where(small, g, 0.0)
-    sums = [_C(jnp.zeros_like(g), jnp.zeros_like(g)) for _ in range(3 if derivatives else 1)]
-    for t_j, w_j in zip(nodes, weights, strict=True):
-        s_j = t_j + 1.0
-        e_j = _C(*cos_sin_2pi((beta1_s * s_j + g_sm * (s_j * s_j)) / two_pi))
-        sums[0] = sums[0] + e_j * w_j
-        if derivatives:
-            sums[1] = sums[1] + e_j * (w_j * t_j)
-            sums[2] = sums[2] + e_j * (w_j * t_j * t_j)
-    sums = [_C(v.re / one, v.im / one) for v in sums]
-    j_small = e1 * sums[0]
-    j = j_small.where(small, j_closed)
-    if not derivatives:
-        j = j.where(~flip, j.conj())
-        return _C(j.re / one, j.im / one), None
-
-    # Derivatives in b and g [radians]; dJ/dc0 = i J needs nothing more.
-    dj_db_closed = ((e1t1.times_i() * -1.0) + e1 * t1_b
-                    - (e2t2.times_i() + e2 * t2_b) + s.times_i() * t_star)
-    dj_dg_closed = ((e1t1.times_i() + e1 * (t1_b * -2.0 + t1_g))
-                    - (e2t2.times_i() + e2 * (t2_b * 2.0 + t2_g))
-                    + s * _C(-0.5 / g_s, t_star * t_star))
-    dj_db = (e1 * sums[1]).times_i().where(small, dj_db_closed)
-    dj_dg = (e1 * sums[2]).times_i().where(small, dj_dg_closed)
-    # Undo the flip: J(c) = conj(J~(-c)), so dJ/dc = -conj(dJ~/dc~) (and dJ/dc0 = i J).
-    j = j.where(~flip, j.conj())
-    dj_db = dj_db.where(~flip, dj_db.conj() * -1.0)
-    dj_dg = dj_dg.where(~flip, dj_dg.conj() * -1.0)
-    return j, (dj_db, dj_dg)
-
-
-@jax.custom_jvp
-def chord_integral(pm, p0, pp):
-    """``\\int_{-1}^{1} exp(i 2 pi p(t)) dt`` for the quadratic ``p`` with ``p(-1) = pm``,
-    ``p(0) = p0``, ``p(1) = pp`` (waves, broadcast arrays). Returns ``(real, imag)``.
-
-    Exact (closed form, see the module docstring) to about 1e-14 absolute for any
-    coefficients; differentiable with a hand-written rule that stays finite everywhere.
-    """
-    pm, p0, pp = jnp.broadcast_arrays(pm, p0, pp)
-    j, _ = _chord(pm, p0, pp, derivatives=False)
-    return j.re, j.im
-
-
-@chord_integral.defjvp
-def _chord_integral_jvp(primals, tangents):
-    pm, p0, pp = jnp.broadcast_arrays(*primals)
-    j, (dj_db, dj_dg) = _chord(pm, p0, pp, derivatives=True)
-    d_pm, d_p0, d_pp = (jnp.broadcast_to(t, pm.shape) for t in tangents)
-    # c0 = 2 pi p0, b = pi (pp - pm), g = pi (pp + pm) - 2 pi p0 (radians).
-    d_c0 = (2.0 * math.pi) * d_p0
-    d_b = math.pi * (d_pp - d_pm)
-    d_g = math.pi * (d_pp + d_pm) - d_c0
-    d_re = -j.im * d_c0 + dj_db.re * d_b + dj_dg.re * d_g
-    d_im = j.re * d_c0 + dj_db.im * d_b + dj_dg.im * d_g
-    return (j.re, j.im), (d_re, d_im)
 
 
 #: ``even_chord_integral``: ``|gamma|`` (waves) up to which ``F`` is the series in
@@ -450,3 +231,207 @@ def _even_chord_integral_jvp(primals, tangents):
     slope = jnp.where(big, far, near)
     # value 2 Re Z: d/dp1 = 2 Re(e F'), d/dp0 = -4 pi Im Z - 2 Re(e F').
     return 2.0 * re, 2.0 * slope * (d1 - d0) - (4.0 * math.pi) * im * d0
+
+
+# --------------------------------------------------------------------------------------
+# Quadratic chords from the even form's functions (``chord_integral``)
+# --------------------------------------------------------------------------------------
+
+#: ``chord_integral``: chords with ``|g| <= _TAYLOR_G`` and ``|b| <= _TAYLOR_B`` (phase ``p0 +
+#: b t + g t^2``, waves) are a Taylor polynomial in ``(b, g)``. ``_TAYLOR_B`` is ``2
+#: sqrt(_TAYLOR_G) + 2 _TAYLOR_G`` (rounded up), so outside the rectangle an end near the
+#: stationary point has ``|g| > _TAYLOR_G``. Measured (derivatives' worst absolute error next
+#: to the rectangle / Taylor terms of the value / kernel's value time, one core): ``_TAYLOR_G
+#: = 0.01``: 2.6e-11 / 81 / 71 ns; 0.005: 9e-11 / 61 / 66 ns; 0.0025: 2.2e-10 / 50 / 62 ns.
+_TAYLOR_G = 0.005
+_TAYLOR_B = 0.152
+#: Terms of the Taylor polynomial kept: those above this on the rectangle's corner.
+_TAYLOR_TOL = 1e-19
+#: Degree of ``chord_integral``'s series of ``h`` in ``u = 1 / |gamma|`` (error 4e-14; the
+#: even form's degree 14 leaves 5e-13, which an end term carries with a factor up to about 1)
+#: and of ``h'`` (error 9e-15; 8e-13 at degree 16, which the derivative's factor ``1 / (pi^2
+#: s^3)`` amplifies up to about 10x).
+_H_FAR_DEGREE = 16
+_HP_DEGREE = 20
+
+
+def h_prime_host(x):
+    """``h'(x) = \\int_0^inf e^{-w} (-i w / 2) (1 + i x w)^{-3/2} dw`` for ``x >= 0``."""
+    x = np.asarray(x, float)
+    w, weights = _composite_gauss(0.0, 48.0, 96, 24)
+    kernel = np.exp(-w)[None, :] * (-0.5j * w[None, :]) * (
+        1.0 + 1j * x.reshape(-1, 1) * w[None, :]) ** -1.5
+    return (kernel @ weights).reshape(x.shape)
+
+
+@functools.cache
+def _h_series():
+    """``h`` and ``dh/du`` at ``x = u / (2 pi)`` as power series in ``u`` on [0, 1]:
+    ``(h_re, h_im, hp_re, hp_im)``."""
+    scale = 1.0 / (2.0 * math.pi)
+    return (_power_series(lambda u: h_host(scale * u).real, _H_FAR_DEGREE),
+            _power_series(lambda u: h_host(scale * u).imag, _H_FAR_DEGREE),
+            _power_series(lambda u: scale * h_prime_host(scale * u).real, _HP_DEGREE),
+            _power_series(lambda u: scale * h_prime_host(scale * u).imag, _HP_DEGREE))
+
+
+@functools.cache
+def _taylor_tables():
+    """Coefficients of the moments ``M_q = \\int_{-1}^{1} t^q e^{i 2 pi (b t + g t^2)} dt``,
+    ``q = 0, 1, 2``, on the rectangle ``|b| <= _TAYLOR_B``, ``|g| <= _TAYLOR_G``.
+
+    Returns per ``q`` a pair (real part, imaginary part), each ``(b_power, g_power, rows)``:
+    the part is ``b^b_power g^g_power sum_l (g^2)^l R_l(b^2)`` with ``rows[l]`` the
+    coefficients of ``R_l``, lowest first. Terms below ``_TAYLOR_TOL`` at the
+    rectangle's corner are left out. (A term ``b^m g^k`` has ``m`` of ``q``'s parity, since
+    ``t^(q + m + 2k)`` must be even, and it is real or imaginary as ``m + k`` is even or odd.)
+    """
+    tables = []
+    for q in range(3):
+        parts = ({}, {})  # (real, imaginary): {k: {m // 2: coefficient}}
+        for k in range(40):
+            for m in range(q % 2, 80, 2):
+                # (2 pi i)^(m + k) / (m! k!) * int t^(q + m + 2k) dt
+                value = ((2.0 * math.pi) ** (m + k) / (math.factorial(m) * math.factorial(k))
+                         * 2.0 / (q + m + 2 * k + 1))
+                if value * _TAYLOR_B**m * _TAYLOR_G**k < _TAYLOR_TOL:
+                    continue
+                power = (m + k) % 4  # i^power: 1, i, -1, -i
+                parts[power % 2].setdefault(k, {})[m // 2] = value if power < 2 else -value
+        pair = []
+        for part in parts:
+            g_power = min(part)  # every k here has one parity
+            rows = tuple(
+                tuple(part.get(k, {}).get(j, 0.0) for j in range(max(part.get(k, {0: 0})) + 1))
+                for k in range(g_power, max(part) + 1, 2))
+            pair.append((q % 2, g_power, rows))
+        tables.append(tuple(pair))
+    return tuple(tables)
+
+
+def _taylor_moment(table, b, g, v, w):
+    """One moment from ``_taylor_tables`` at ``(b, g)`` (``v = b^2``, ``w = g^2``) as
+    ``(re, im)``."""
+    values = []
+    for b_power, g_power, rows in table:
+        total = None
+        for row in rows[::-1]:
+            term = _even_poly(row, v)
+            total = term if total is None else total * w + term
+        total = total * b if b_power else total
+        values.append(total * g if g_power else total)
+    return tuple(values)
+
+
+def _chord_parts(pm, p0, pp, derivatives):
+    """``J`` and, if asked, ``M1``, ``M2`` (``\\int t^q e^{i 2 pi p(t)} dt``) as ``_C``."""
+    pm, p0, pp = materialise(pm, p0, pp)
+    h_re, h_im, hp_re, hp_im = _h_series()
+    _, _, p_even, q_even, _, _ = _even_series()
+    b = 0.5 * (pp - pm)
+    g = 0.5 * (pp + pm) - p0
+    slope_p, slope_m = b + 2.0 * g, b - 2.0 * g
+    abs_g = jnp.abs(g)
+    sign_g = jnp.where(g < 0, -1.0, 1.0)
+    taylor = (jnp.abs(b) <= _TAYLOR_B) & (abs_g <= _TAYLOR_G)
+    ends = []
+    for slope in (slope_p, slope_m):
+        far = (slope * slope >= 4.0 * abs_g) & ~taylor  # |gamma| >= 1 at this end
+        sigma = jnp.where(far, jnp.where(slope < 0, -1.0, 1.0) * sign_g, 0.0)
+        ends.append((slope, far, sigma))
+    d_sigma = ends[0][2] - ends[1][2]
+    # The stationary phase c = p(t*) is needed where an end is near t* or t* is inside.
+    plain = ends[0][1] & ends[1][1] & (d_sigma == 0)
+    need_c = ~taylor & ~plain
+    g_c = jnp.where(need_c, g, 1.0)
+    inv_2g = 0.5 / g_c
+    reference = jnp.where(taylor, p0, jnp.where(need_c, p0 - (0.5 * b * b) * inv_2g, 0.0))
+    # Under the derivative rule the phase factors, the value and the moments have several
+    # consumers each, and XLA would recompute them in every one: stored once. (Storing the
+    # series' values as well measured slower: many small loops, each through memory.)
+    one = runtime_one(g)
+
+    def keep(c):
+        return _C(c.re / one, c.im / one) if derivatives else c
+
+    e_ref = keep(_C(*cos_sin_2pi(reference)))
+    e_end = [keep(_C(*cos_sin_2pi(p))) for p in (pp, pm)]
+
+    j_closed = None
+    parts = []
+    for (slope, far, _), e_e in zip(ends, e_end, strict=True):
+        # Far from t*: A = e_e (-i / (2 pi s)) h_sigma(u), u = 4 |g| / s^2 (h_sigma = conj h
+        # for g < 0).
+        s_far = jnp.where(far, slope, 1.0)
+        inv_s = 1.0 / s_far
+        u = jnp.where(far, 4.0 * abs_g * inv_s * inv_s, 0.0)
+        h = _C(_even_poly(h_re, u), sign_g * _even_poly(h_im, u))
+        r = _C(h.im, -h.re) * (inv_s / (2.0 * math.pi))
+        a = e_e * r
+        # Near t*: S = e_ref L F(gamma), L = s / (2 g), gamma = s L / 2, |gamma| < 1.
+        near_l = jnp.where(far, 0.0, slope * inv_2g)
+        gamma = 0.5 * slope * near_l
+        v = gamma * gamma
+        f = _C(_even_poly(p_even, v), gamma * _even_poly(q_even, v))
+        term = a.where(far, e_ref * (f * near_l))
+        j_closed = term if j_closed is None else j_closed - term
+        parts.append((inv_s, u, h, a, e_e))
+    quarter = 0.25 * jax.lax.rsqrt(jnp.where(need_c, abs_g, 1.0)) * d_sigma
+    q_part = _C(e_ref.re - sign_g * e_ref.im, e_ref.im + sign_g * e_ref.re) * quarter
+    j_closed = j_closed + q_part
+    tables = _taylor_tables()
+    b_t, g_t = jnp.where(taylor, b, 0.0), jnp.where(taylor, g, 0.0)
+    v_t, w_t = b_t * b_t, g_t * g_t
+    j = (e_ref * _C(*_taylor_moment(tables[0], b_t, g_t, v_t, w_t))).where(taylor, j_closed)
+    if not derivatives:
+        return j, None
+    j = keep(j)
+    # Far from t* at both ends: differentiate A = e^{i 2 pi p_e} R(s_e, g) in closed form,
+    # dR/ds / (2 pi i) = (h + 2 u h') / (4 pi^2 s^2), dR/dg / (2 pi i) = -sgn(g) h' / (pi^2 s^3).
+    m1_plain = m2_plain = None
+    for (inv_s, u, h, a, e_e), end in zip(parts, (1.0, -1.0), strict=True):
+        hp = _C(_even_poly(hp_re, u), sign_g * _even_poly(hp_im, u))
+        inv_s2 = inv_s * inv_s
+        r_s = (h + hp * (2.0 * u)) * (inv_s2 / (4.0 * math.pi**2))
+        r_g = hp * (-sign_g * inv_s2 * inv_s / math.pi**2)
+        m1_e = a * end + e_e * r_s
+        m2_e = a + e_e * (r_s * (2.0 * end) + r_g)
+        if m1_plain is None:
+            m1_plain, m2_plain = m1_e, m2_e
+        else:
+            m1_plain, m2_plain = m1_plain - m1_e, m2_plain - m2_e
+    # Elsewhere g != 0: b J + 2 g M1 = D1, b M1 + 2 g M2 = D2 (integration by parts).
+    e_p, e_m = e_end
+    inv_2pi_i = _C(0.0, -1.0 / (2.0 * math.pi))
+    d1 = (e_p - e_m) * inv_2pi_i
+    d2 = (e_p + e_m - j) * inv_2pi_i
+    m1_id = (d1 - j * b) * inv_2g
+    m2_id = (d2 - m1_id * b) * inv_2g
+    m1_t = e_ref * _C(*_taylor_moment(tables[1], b_t, g_t, v_t, w_t))
+    m2_t = e_ref * _C(*_taylor_moment(tables[2], b_t, g_t, v_t, w_t))
+    m1 = m1_t.where(taylor, m1_plain.where(plain, m1_id))
+    m2 = m2_t.where(taylor, m2_plain.where(plain, m2_id))
+    return j, (keep(m1), keep(m2))
+
+
+@jax.custom_jvp
+def chord_integral(pm, p0, pp):
+    """``\\int_{-1}^{1} exp(i 2 pi p(t)) dt`` for the quadratic ``p`` with ``p(-1) = pm``,
+    ``p(0) = p0``, ``p(1) = pp`` (waves, arrays of one shape), as ``(real, imag)``.
+
+    Closed form (module docstring), within about 1e-13 absolute for any coefficients, with a
+    derivative rule that stays finite everywhere."""
+    j, _ = _chord_parts(pm, p0, pp, derivatives=False)
+    return j.re, j.im
+
+
+@chord_integral.defjvp
+def _chord_integral_jvp(primals, tangents):
+    j, (m1, m2) = _chord_parts(*primals, derivatives=True)
+    d_pm, d_p0, d_pp = tangents
+    d_b = 0.5 * (d_pp - d_pm)
+    d_g = 0.5 * (d_pp + d_pm) - d_p0
+    # dJ = 2 pi i (J dp0 + M1 db + M2 dg)
+    tangent = j * d_p0 + m1 * d_b + m2 * d_g
+    two_pi = 2.0 * math.pi
+    return (j.re, j.im), (-two_pi * tangent.im, two_pi * tangent.re)

@@ -15,11 +15,11 @@ Engines
     integrand is entire, so Gauss–Legendre converges spectrally for every ``s`` (no square
     root at the lens tips, no PSF window). The rule is rescaled to the exact lens area, so the
     aberration-free OTF is exact to rounding at any order.
-    (A closed form for each chord's ``t`` integral, exact when the phase is quadratic along
-    the chords as for Seidel wavefronts, is in ``_chords``. In general it is off,
-    ``_EXACT_CHORDS``, because on CPU it measured slower; on the rotationally symmetric
-    path, whose chords' phases are even, its one-parameter form is 1.6-4x faster than the
-    Gauss chords and is used.)
+    Where the phase is quadratic along the chords (Seidel wavefronts, Zernike terms up to
+    ``Z11``), each chord's ``t`` integral has a closed form (``_chords``): on the
+    rotationally symmetric path, whose chords' phases are even, always (1.6-4x faster than
+    the Gauss chords there); elsewhere from ``_CLOSED_FORM_ORDER`` Gauss nodes along the
+    chords, where it costs less than the Gauss rule it replaces.
 ``"nudft"``
     Pupil on a ``B x B`` square grid, PSF by a ``2B``-padded FFT, then the OTF at each node by
     an explicit (non-uniform) DFT of the PSF. First order in ``1/B`` (staircase pupil edge).
@@ -70,8 +70,19 @@ OTF_METHODS = ("overlap", "nudft", "fft")
 # about 8 * 2 * block * n_phi * n_t bytes per temporary).
 _OVERLAP_BLOCK = 128
 
-#: Integrate the chords of the overlap lens in closed form when the wavefront allows it.
-_EXACT_CHORDS = False
+#: The Gauss order along the chords from which ``_chords.chord_integral`` replaces the
+#: Gauss rule off the symmetric path (float64, phases quadratic along the chords). The
+#: closed form costs about 65 ns a chord (value) and 90 ns (``value_and_grad``) on one core
+#: of the 2-core AMD EPYC host, a Gauss node about 1.5 and 2.1 ns in place. Measured in
+#: ``jmse`` on ``Seidel(-4, 3, -3, 2.5, 2)`` at field 0.9, u 0.4 (value / value_and_grad,
+#: Gauss -> closed form, one core): the steep tier's grid, order 64, 182 / 373 -> 131 / 340
+#: ms; the balanced grid, 96, 402 / 792 -> 237 / 544 ms; ``HIGH_STEEP_GRID``, 80, 443 / 1119
+#: -> 390 / 1082 ms; but tier 3's grid, 40, 74 / 183 -> 79 / 196 ms, and ``"high"``'s own,
+#: 48, 67 / 156 -> 66 / 203 ms (benchmarks/README.md, optimisation log, session 100).
+_CLOSED_FORM_ORDER = 64
+#: The order along the chords that sizes the overlap engine's blocks when the chords are
+#: integrated in closed form.
+_CLOSED_FORM_BLOCK_ORDER = 16
 
 # The lens's two halves (``_chord_phase``'s ``sides``).
 _BOTH = (1.0, -1.0)
@@ -246,8 +257,12 @@ def _quadratic_chords(aberrations) -> bool:
     return degree is not None and degree <= 2
 
 
-def _exact_chords(aberrations) -> bool:
-    return _EXACT_CHORDS and _quadratic_chords(aberrations)
+def _closed_form_chords(aberrations, n_t: int, dtype, symmetric: bool) -> bool:
+    """Whether ``_otf_overlap_flat`` integrates the chords off the symmetric path in closed
+    form (``_chords.chord_integral``): quadratic along them, a Gauss rule of at least
+    ``_CLOSED_FORM_ORDER`` nodes asked for, float64."""
+    return (not symmetric and _quadratic_chords(aberrations) and n_t >= _CLOSED_FORM_ORDER
+            and not is_single_precision(dtype))
 
 
 @functools.partial(jax.checkpoint, static_argnums=(9,))
@@ -291,8 +306,15 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype, zero_sl
     quadratic along the chords (``perpendicular_chord_degree <= 2``: Seidel wavefronts and
     radial Zernike terms up to ``Z11``), it is ``p0 + gamma t^2`` there and each chord is
     integrated in closed form (``_chords.even_chord_integral``, from the phase at ``t = 0``
-    and ``t = 1``): exact along the chords, so ``n_t`` is not used."""
-    exact = _exact_chords(aberrations) and not symmetric
+    and ``t = 1``): exact along the chords, so ``n_t`` is not used.
+
+    Off the symmetric path, for such wavefronts in float64 with ``n_t >=
+    _CLOSED_FORM_ORDER``, each chord is likewise integrated in closed form
+    (``_chords.chord_integral``, from the phase at ``t = -1, 0, 1``) instead of by the Gauss
+    rule of order ``n_t``."""
+    # Off the symmetric path, quadratic along the chords and a long Gauss rule asked for:
+    # each chord in closed form (``_chords.chord_integral``, from the phase at t = -1, 0, 1).
+    exact = _closed_form_chords(aberrations, n_t, dtype, symmetric)
     # Symmetric and quadratic along the chords (Seidel's and the radial Zernike terms to
     # rho^4): each chord's phase is p0 + gamma t^2, integrated in closed form.
     even_exact = symmetric and _quadratic_chords(aberrations)
@@ -302,7 +324,7 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype, zero_sl
     frac, w_frac, t_colloc, interp, moment = (
         jnp.asarray(a, dtype) for a in rule(n_phi, n_t, chord_points)
     )
-    if exact:  # the phase at t = -1, 0, 1 fixes the quadratic; the t integral is exact
+    if exact:  # the phase at t = -1, 0, 1 fixes the quadratic; exact along t
         t_colloc = jnp.asarray([-1.0, 0.0, 1.0], dtype)
     if even_exact:  # the phase at t = 0 and 1 fixes p0 + gamma t^2
         t_colloc = jnp.asarray([0.0, 1.0], dtype)
@@ -335,7 +357,8 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype, zero_sl
         phase = _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc, _BOTH)
         j_re, j_im = chord_integral(phase[..., 0], phase[..., 1], phase[..., 2])
         w = chord_w[:, None, :]
-        re, im = jnp.sum(w * j_re, axis=(1, 2)), jnp.sum(w * j_im, axis=(1, 2))
+        # One variadic sum, so that the kernel is evaluated once for both parts.
+        re, im = _sum_pair(w * j_re, w * j_im)
     else:
         phase = _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc, _BOTH)
         re, im = _gauss_chords(phase, chord_w, n_phi, chord_points, interp, moment)
@@ -395,7 +418,10 @@ def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False, zero_slope=
     field = jnp.asarray(field, dtype)
     n = flat_x.shape[0]
     slope = _mean_gradient(aberrations, field, dtype) if zero_slope else None
-    block = max(1, min(n, _OVERLAP_BLOCK * 1024 // (n_phi * n_t)))
+    closed_form = _closed_form_chords(aberrations, n_t, dtype, symmetric)
+    # Closed-form chords hold a few arrays per chord, not one per Gauss node along it.
+    block = max(1, min(n, _OVERLAP_BLOCK * 1024 // (n_phi * (_CLOSED_FORM_BLOCK_ORDER
+                                                            if closed_form else n_t))))
     if n <= block:
         re, im = _otf_overlap_flat(aberrations, flat_x, flat_y, field, n_phi, n_t, dtype,
                                    slope, symmetric)
@@ -412,7 +438,11 @@ def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False, zero_slope=
             return _otf_overlap_flat(aberrations, xy[0], xy[1], field, n_phi, n_t, dtype,
                                      slope, symmetric)
 
-        if remat:
+        # Closed-form chords are not recomputed: their derivative rule's value and moments,
+        # recomputed in the reverse pass, would be recomputed again by XLA in each of the
+        # three cotangents that use them (value_and_grad on the steep tier's grid 2.2x
+        # slower), and stored they take fewer bytes than the Gauss chords' moments.
+        if remat and not closed_form:
             one_block = jax.checkpoint(one_block)
 
         re, im = jax.lax.map(one_block, (px, py))
@@ -587,7 +617,9 @@ def otf(
         When the inputs are concrete, a ``UserWarning`` says when they look too few for
         1e-6 (``_phase_spread``); with frequencies up to the cutoff the default (32, 32)
         is quiet up to 8 waves of defocus or 6 of coma at full field (cautious: they hold
-        1e-6 at (32, 32) up to 10 and 8 waves).
+        1e-6 at (32, 32) up to 10 and 8 waves). For Seidel wavefronts in float64, ``n_t >=
+        64`` integrates each chord in closed form instead (exact along the chords, and
+        cheaper than so long a Gauss rule).
     B : int
         Square pupil grid size (``"nudft"``, ``"fft"``).
 

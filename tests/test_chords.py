@@ -1,10 +1,10 @@
 """Closed-form chord integrals (jmse_jax._chords) against SciPy and float64 brute force.
 
-The overlap engine uses the general form (``chord_integral``) only behind the private switch
-``_otf._EXACT_CHORDS`` (measured slower than the Gauss chords on CPU; benchmarks/README.md,
-optimisation log), so the engine test turns the switch on and compares with the Gauss path.
-The even form (``even_chord_integral``) is what the engine's rotationally symmetric path
-(the one-ray plans) uses for Seidel wavefronts; its engine checks are in ``test_otf.py``.
+The overlap engine uses the general form (``chord_integral``) off the symmetric path from
+``_otf._CLOSED_FORM_ORDER`` Gauss nodes along the chords, so the engine test lowers that
+order and compares with the Gauss path. The even form (``even_chord_integral``) is what the
+engine's rotationally symmetric path (the one-ray plans) uses for Seidel wavefronts; its
+engine checks are in ``test_otf.py``.
 """
 
 from __future__ import annotations
@@ -45,13 +45,23 @@ def _cases():
             c0.append(rng.uniform(-3, 3, 12))
             c1.append(rng.normal(size=12) * s1)
             c2.append(rng.normal(size=12) * s2)
-    two_pi = 2 * np.pi
-    g0, b0 = _chords._G_SMALL / two_pi, _chords._B_SMALL / two_pi  # thresholds in waves
-    extra_c2 = [g0 * 0.999, g0 * 1.001, g0, 0.3, 0.3, 0.3, 1.0, -1.0, 0.5, 0.0]
-    extra_c1 = [b0, b0 + 2 * g0, b0 * 0.999, 0.6, -0.6, 0.6 + 1e-10, 2.0, 2.0, 0.0, 0.0]
-    c0.append(np.zeros(len(extra_c1)))
-    c1.append(np.array(extra_c1))  # c1 = +-2 c2: stationary point at an end of the chord
-    c2.append(np.array(extra_c2))
+    # The Taylor rectangle's edges and corners, just inside and just outside.
+    g_t, b_t = _chords._TAYLOR_G, _chords._TAYLOR_B
+    for fg, fb in [(1.0, 1.0), (0.999, 1.001), (1.001, 0.999), (1.001, 1.001), (0.5, 1.001),
+                   (1.001, 0.5), (1.0, 0.0), (0.0, 1.0)]:
+        for sg, sb in [(1, 1), (1, -1), (-1, 1), (-1, -1)]:
+            c0.append(rng.uniform(-3, 3, 1))
+            c1.append(np.array([sb * fb * b_t]))
+            c2.append(np.array([sg * fg * g_t]))
+    # An end slope s = c1 + 2 c2 at the far / near border s^2 = 4 |c2|, and at t* = +-1.
+    g = 10.0 ** rng.uniform(-2.2, 1.5, 40) * rng.choice([-1.0, 1.0], 40)
+    for f in (1.0 - 1e-12, 1.0, 1.0 + 1e-12):
+        c0.append(rng.uniform(-3, 3, 40))
+        c1.append(f * 2.0 * np.sqrt(np.abs(g)) - 2.0 * g)
+        c2.append(g)
+    c0.append(np.zeros(8))
+    c1.append(np.array([0.6, -0.6, 2.0, -2.0, 0.01, -0.01, 40.0, -40.0]))
+    c2.append(np.array([0.3, 0.3, 1.0, 1.0, 0.005, 0.005, 20.0, 20.0]))
     return np.concatenate(c0), np.concatenate(c1), np.concatenate(c2)
 
 
@@ -59,19 +69,36 @@ def _phases(c0, c1, c2):
     return c0 - c1 + c2, c0, c0 + c1 + c2
 
 
-def test_special_functions_match_scipy_wofz():
-    # Ahat(y) = (sqrt(pi) / 2) e^{i pi/4} w(e^{i pi/4} y / 2), K(eps) = -i y Ahat(y).
-    y = np.linspace(0.0, 12.0, 61)
-    ref = np.sqrt(np.pi) / 2 * np.exp(0.25j * np.pi) * wofz(np.exp(0.25j * np.pi) * y / 2)
-    assert np.max(np.abs(_chords.ahat_host(y) - ref)) < 5e-15
-    eps = np.linspace(1e-5, 1.0 / _chords._Y**2, 41)
-    yy = 1 / np.sqrt(eps)
-    ref_k = -1j * yy * np.sqrt(np.pi) / 2 * np.exp(0.25j * np.pi) * wofz(
-        np.exp(0.25j * np.pi) * yy / 2)
-    assert np.max(np.abs(_chords.k_host(eps) - ref_k)) < 2e-14
-    # The device series reproduce the host integrals.
-    a = _chords._ahat(jnp.asarray(y[y <= _chords._Y]))
-    assert np.max(np.abs(a[0] + 1j * a[1] - ref[y <= _chords._Y])) < 1e-14
+def test_h_and_its_derivative_match_scipy_wofz():
+    # h(x) = int_0^inf e^{-w} (1 + i x w)^{-1/2} dw = sqrt(pi / (i x)) w(e^{i pi/4} / sqrt(x)).
+    x = np.linspace(1e-4, 1.0 / (2.0 * np.pi), 60)
+    ref = np.sqrt(np.pi) / (np.sqrt(x) * np.exp(0.25j * np.pi)) * wofz(
+        np.exp(0.25j * np.pi) / np.sqrt(x))
+    assert np.max(np.abs(_chords.h_host(x) - ref)) < 2e-14
+    # h' integrates to h's increments.
+    for lo, hi in [(0.0, 0.05), (0.05, 1.0 / (2.0 * np.pi))]:
+        t, w = np.polynomial.legendre.leggauss(40)
+        t, w = lo + (hi - lo) * (t + 1) / 2, w * (hi - lo) / 2
+        increment = _chords.h_host(np.array(hi)) - _chords.h_host(np.array(lo))
+        assert abs(_chords.h_prime_host(t) @ w - increment) < 1e-15
+    # The device series reproduce the host functions (u = 2 pi x on [0, 1]).
+    u = np.linspace(0.0, 1.0, 101)
+    h_re, h_im, hp_re, hp_im = _chords._h_series()
+    poly = np.polynomial.polynomial.polyval
+    assert np.max(np.abs(poly(u, h_re) + 1j * poly(u, h_im)
+                         - _chords.h_host(u / (2 * np.pi)))) < 1e-13
+    assert np.max(np.abs(poly(u, hp_re) + 1j * poly(u, hp_im)
+                         - _chords.h_prime_host(u / (2 * np.pi)) / (2 * np.pi))) < 1e-13
+
+
+def test_taylor_tables_are_the_moments():
+    # On the rectangle's corner the tables give the moments to rounding.
+    b, g = _chords._TAYLOR_B, -_chords._TAYLOR_G
+    t, w = _composite_gauss()
+    e = np.exp(2j * np.pi * (b * t + g * t * t))
+    for q, table in enumerate(_chords._taylor_tables()):
+        got = _chords._taylor_moment(table, b, g, b * b, g * g)
+        assert abs(got[0] + 1j * got[1] - (e * t**q) @ w) < 1e-15
 
 
 def test_pure_quadratic_matches_fresnel():
@@ -81,11 +108,11 @@ def test_pure_quadratic_matches_fresnel():
     ref = (c + 1j * s) / np.sqrt(c2)
     zero = np.zeros_like(c2)
     re, im = jax.jit(_chords.chord_integral)(c2, zero, c2)
-    np.testing.assert_allclose(np.asarray(re) + 1j * np.asarray(im), ref, rtol=0, atol=3e-15)
+    np.testing.assert_allclose(np.asarray(re) + 1j * np.asarray(im), ref, rtol=0, atol=1e-14)
     # Conjugate symmetry (c2 < 0) and the c0 phase factor.
     re, im = jax.jit(_chords.chord_integral)(0.25 - c2, 0.25 + zero, 0.25 - c2)
     np.testing.assert_allclose(np.asarray(re) + 1j * np.asarray(im), 1j * np.conj(ref),
-                               rtol=0, atol=3e-15)
+                               rtol=0, atol=1e-14)
 
 
 def test_values_and_derivatives_against_brute_force():
@@ -104,13 +131,14 @@ def test_values_and_derivatives_against_brute_force():
     # c1 = (pp - pm) / 2, c2 = (pp + pm) / 2 - p0.
     d_c0, d_c1, d_c2 = 2j * np.pi * j, 2j * np.pi * m1, 2j * np.pi * m2
     refs = ((d_c2 - d_c1) / 2, d_c0 - d_c2, (d_c1 + d_c2) / 2)
+    # Chords of little phase outside the Taylor rectangle: there the identities lose up to
+    # (|b| / |g|)^2, about 1e-10 next to the rectangle.
+    small_phase = (np.abs(c2) < 0.1) & (np.abs(c1) < 1.0)
     for k, ref in enumerate(refs):
         got = np.asarray(g_re[k]) + 1j * np.asarray(g_im[k])
         assert np.all(np.isfinite(got))
-        # Near-degenerate chords (g ~ 1e-3 rad) amplify the inputs' rounding: ~1e-9 there.
-        assert np.max(np.abs(got - ref)) < 5e-9
-        typical = np.abs(got - ref)[np.abs(c2) > 0.05]
-        assert np.max(typical) < 1e-11
+        assert np.max(np.abs(got - ref)) < 3e-10
+        assert np.max(np.abs(got - ref)[~small_phase]) < 3e-12
 
 
 def test_gradient_finite_at_degenerate_points():
@@ -151,28 +179,46 @@ def test_perpendicular_chord_degree():
         assert (np.max(np.abs(residual)) < 1e-12) == quadratic
 
 
+def test_second_derivatives_finite_at_degenerate_points():
+    g_t, b_t = _chords._TAYLOR_G, _chords._TAYLOR_B
+    c1 = np.array([0.0, 0.0, 0.6, -0.6, b_t, b_t, 2.0 * np.sqrt(0.3) - 0.6, 1e-300, 3.0])
+    c2 = np.array([0.0, 0.3, 0.3, 0.3, g_t, 0.0, 0.3, 0.0, 0.0])
+    pm, p0, pp = _phases(np.full(c1.size, 0.2), c1, c2)
+    hess = jax.jit(jax.vmap(jax.hessian(lambda a, b, c: _chords.chord_integral(a, b, c)[0],
+                                        (0, 1, 2))))(pm, p0, pp)
+    assert all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(hess))
+
+
 @pytest.mark.parametrize("coefficients", [
     dict(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198),
     dict(w020=-8.0, w040=4.0, w131=2.0, w222=2.0, w220=1.0),
     dict(),
 ])
-def test_engine_with_exact_chords_matches_gauss(monkeypatch, coefficients):
+def test_engine_with_closed_form_chords_matches_gauss(monkeypatch, coefficients):
     ab = jj.Seidel(**coefficients)
     nu_x = jnp.asarray([0.0, 1e-9, 0.05, 0.3, -0.45, 0.7, 0.999, 1.0])
     nu_y = jnp.asarray([0.0, 0.0, 0.2, -0.1, 0.5, 0.3, 0.0, 0.0])
 
-    def run(exact):
-        monkeypatch.setattr(_otf, "_EXACT_CHORDS", exact)
+    def run(order):
+        monkeypatch.setattr(_otf, "_CLOSED_FORM_ORDER", order)
+        jax.clear_caches()  # the engine's jitted programs do not see the switch
         h = jj.otf(ab, nu_x, nu_y, 0.95, nodes=(48, 48))
         grad = jax.grad(lambda a: jnp.sum(jnp.abs(jj.otf(a, nu_x, nu_y, 0.95,
                                                           nodes=(48, 48))) ** 2))(ab)
         return np.asarray(h), np.array(jax.tree_util.tree_leaves(grad))
 
-    h_exact, g_exact = run(True)
-    h_gauss, g_gauss = run(False)
+    h_exact, g_exact = run(48)
+    h_gauss, g_gauss = run(49)
+    jax.clear_caches()
     assert np.max(np.abs(h_exact - h_gauss)) < 1e-13
     assert np.all(np.isfinite(g_exact))
-    np.testing.assert_allclose(g_exact, g_gauss, rtol=1e-9, atol=1e-11)
+    np.testing.assert_allclose(g_exact, g_gauss, rtol=1e-11, atol=1e-13)
+    # With the engine's own threshold, a long rule along the chords takes the closed form.
+    assert _otf._CLOSED_FORM_ORDER == 49
+    monkeypatch.undo()
+    assert _otf._CLOSED_FORM_ORDER <= 64
+    h_long = np.asarray(jj.otf(ab, nu_x, nu_y, 0.95, nodes=(48, 64)))
+    assert np.max(np.abs(h_long - h_gauss)) < 1e-13
 
 
 def _even_cases():
