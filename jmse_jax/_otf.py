@@ -78,7 +78,11 @@ _OVERLAP_BLOCK = 128
 #: Gauss -> closed form, one core): the steep tier's grid, order 64, 182 / 373 -> 131 / 340
 #: ms; the balanced grid, 96, 402 / 792 -> 237 / 544 ms; ``HIGH_STEEP_GRID``, 80, 443 / 1119
 #: -> 390 / 1082 ms; but tier 3's grid, 40, 74 / 183 -> 79 / 196 ms, and ``"high"``'s own,
-#: 48, 67 / 156 -> 66 / 203 ms (benchmarks/README.md, optimisation log, session 100).
+#: 48, 67 / 156 -> 66 / 203 ms (benchmarks/README.md, optimisation log, session 100). With
+#: the closed form's larger blocks and no recomputation, the switch at 32 measured in the
+#: default itself (``ab_compare.py``, bank cases): tier 3 ``hypercube_2`` 73.3 / 207 -> 75.6
+#: / 191 ms, ``wide_u1_strong`` 76.5 / 220 -> 77.8 / 212 ms, tier 2 ``fig1_u_0.5`` 29.4 /
+#: 87.5 -> 32.5 / 87.2 ms: no clear gain, so 64 stands.
 _CLOSED_FORM_ORDER = 64
 #: The order along the chords that sizes the overlap engine's blocks when the chords are
 #: integrated in closed form.
