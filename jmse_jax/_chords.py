@@ -421,14 +421,15 @@ def chord_integral(pm, p0, pp):
 
     Closed form (module docstring), within about 1e-13 absolute for any coefficients, with a
     derivative rule that stays finite everywhere."""
-    j, _ = _chord_parts(pm, p0, pp, derivatives=False)
+    j, _ = _chord_parts(*jnp.broadcast_arrays(pm, p0, pp), derivatives=False)
     return j.re, j.im
 
 
 @chord_integral.defjvp
 def _chord_integral_jvp(primals, tangents):
+    primals = jnp.broadcast_arrays(*primals)
     j, (m1, m2) = _chord_parts(*primals, derivatives=True)
-    d_pm, d_p0, d_pp = tangents
+    d_pm, d_p0, d_pp = (jnp.broadcast_to(t, primals[0].shape) for t in tangents)
     d_b = 0.5 * (d_pp - d_pm)
     d_g = 0.5 * (d_pp + d_pm) - d_p0
     # dJ = 2 pi i (J dp0 + M1 db + M2 dg)

@@ -109,6 +109,12 @@ def test_pure_quadratic_matches_fresnel():
     zero = np.zeros_like(c2)
     re, im = jax.jit(_chords.chord_integral)(c2, zero, c2)
     np.testing.assert_allclose(np.asarray(re) + 1j * np.asarray(im), ref, rtol=0, atol=1e-14)
+    # Arguments broadcast against each other, in the value and the derivative.
+    re, im = _chords.chord_integral(c2, 0.0, c2)
+    np.testing.assert_allclose(np.asarray(re) + 1j * np.asarray(im), ref, rtol=0, atol=1e-14)
+    d = jax.grad(lambda p: jnp.sum(_chords.chord_integral(c2, p, c2)[0]))(0.0)
+    np.testing.assert_allclose(float(d), np.sum(-2 * np.pi * (ref.imag - (
+        _brute(np.zeros_like(c2), np.zeros_like(c2), c2)[2]).imag)), rtol=1e-11)
     # Conjugate symmetry (c2 < 0) and the c0 phase factor.
     re, im = jax.jit(_chords.chord_integral)(0.25 - c2, 0.25 + zero, 0.25 - c2)
     np.testing.assert_allclose(np.asarray(re) + 1j * np.asarray(im), 1j * np.conj(ref),
