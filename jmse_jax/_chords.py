@@ -112,12 +112,6 @@ class _C:
             return _C(self.re * o.re - self.im * o.im, self.re * o.im + self.im * o.re)
         return _C(self.re * o, self.im * o)
 
-    def times_i(self):
-        return _C(-self.im, self.re)
-
-    def conj(self):
-        return _C(self.re, -self.im)
-
     def where(self, cond, other):
         """``self`` where ``cond``, else ``other``."""
         return _C(jnp.where(cond, self.re, other.re), jnp.where(cond, self.im, other.im))
