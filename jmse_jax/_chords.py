@@ -127,12 +127,14 @@ _H_DEGREE = 14
 _EVEN_SERIES_DEGREE = 12
 
 
-def h_host(x):
-    """``h(x) = \\int_0^inf e^{-w} (1 + i x w)^{-1/2} dw`` for ``x >= 0`` (NumPy, float64)."""
+def h_host(x, derivative=False):
+    """``h(x) = \\int_0^inf e^{-w} (1 + i x w)^{-1/2} dw`` for ``x >= 0``, or ``h'(x) =
+    \\int_0^inf e^{-w} (-i w / 2) (1 + i x w)^{-3/2} dw`` (NumPy, float64)."""
     x = np.asarray(x, float)
     w, weights = _composite_gauss(0.0, 48.0, 96, 24)  # e^{-48}: below 1e-20
-    values = (np.exp(-w)[None, :] * (1.0 + 1j * x.reshape(-1, 1) * w[None, :]) ** -0.5) @ weights
-    return values.reshape(x.shape)
+    base = 1.0 + 1j * x.reshape(-1, 1) * w[None, :]
+    kernel = (-0.5j * w[None, :]) * base**-1.5 if derivative else base**-0.5
+    return ((np.exp(-w)[None, :] * kernel) @ weights).reshape(x.shape)
 
 
 def even_f_host(gamma, derivative=False):
@@ -249,15 +251,6 @@ _H_FAR_DEGREE = 16
 _HP_DEGREE = 20
 
 
-def h_prime_host(x):
-    """``h'(x) = \\int_0^inf e^{-w} (-i w / 2) (1 + i x w)^{-3/2} dw`` for ``x >= 0``."""
-    x = np.asarray(x, float)
-    w, weights = _composite_gauss(0.0, 48.0, 96, 24)
-    kernel = np.exp(-w)[None, :] * (-0.5j * w[None, :]) * (
-        1.0 + 1j * x.reshape(-1, 1) * w[None, :]) ** -1.5
-    return (kernel @ weights).reshape(x.shape)
-
-
 @functools.cache
 def _h_series():
     """``h`` and ``dh/du`` at ``x = u / (2 pi)`` as power series in ``u`` on [0, 1]:
@@ -265,8 +258,8 @@ def _h_series():
     scale = 1.0 / (2.0 * math.pi)
     return (_power_series(lambda u: h_host(scale * u).real, _H_FAR_DEGREE),
             _power_series(lambda u: h_host(scale * u).imag, _H_FAR_DEGREE),
-            _power_series(lambda u: scale * h_prime_host(scale * u).real, _HP_DEGREE),
-            _power_series(lambda u: scale * h_prime_host(scale * u).imag, _HP_DEGREE))
+            _power_series(lambda u: scale * h_host(scale * u, True).real, _HP_DEGREE),
+            _power_series(lambda u: scale * h_host(scale * u, True).imag, _HP_DEGREE))
 
 
 @functools.cache
@@ -343,10 +336,10 @@ def _chord_parts(pm, p0, pp, derivatives):
     # Under the derivative rule the phase factors, the value and the moments have several
     # consumers each, and XLA would recompute them in every one: stored once. (Storing the
     # series' values as well measured slower: many small loops, each through memory.)
-    one = runtime_one(g)
+    one = runtime_one(g) if derivatives else None
 
     def keep(c):
-        return _C(c.re / one, c.im / one) if derivatives else c
+        return c if one is None else _C(c.re / one, c.im / one)
 
     e_ref = keep(_C(*cos_sin_2pi(reference)))
     e_end = [keep(_C(*cos_sin_2pi(p))) for p in (pp, pm)]
