@@ -202,16 +202,26 @@ def _contract(weights, moments):
     return jnp.sum(weights * jnp.sum(moments, axis=-1), axis=-1)
 
 
+@jax.custom_jvp
 def _sum_pair(a, b):
-    """``(sum(a), sum(b))`` over the last two axes in one variadic reduction (no derivative).
+    """``(sum(a), sum(b))`` over the last two axes in one variadic reduction.
 
     XLA's CPU backend hands a plain sum, with its element-wise producers, to a YNNPACK
     fusion that evaluates them several times slower than XLA's own loops; YNNPACK takes no
-    variadic reduction, so this one stays an XLA loop, in every program alike.
+    variadic reduction, so this one stays an XLA loop, in every program alike. The
+    derivative rule keeps the variadic reduction for the value and sums the tangents
+    plainly: JAX's own rule for a general reduction builds it as a tree of slices and
+    adds, into each of which XLA fused the producers of both parts again.
     """
     zero = jnp.zeros((), a.dtype)
     return jax.lax.reduce((a, b), (zero, zero),
                           lambda x, y: (x[0] + y[0], x[1] + y[1]), (a.ndim - 2, a.ndim - 1))
+
+
+@_sum_pair.defjvp
+def _sum_pair_jvp(primals, tangents):
+    da, db = tangents
+    return _sum_pair(*primals), (jnp.sum(da, axis=(-2, -1)), jnp.sum(db, axis=(-2, -1)))
 
 
 @_phase_integral.defjvp
@@ -358,8 +368,14 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype, zero_sl
             re = _even_phase_integral(phase[:, 0], 2.0 * chord_w, interp, moment)
         im = jnp.zeros_like(re)
     elif exact:
-        phase = _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc, _BOTH)
-        j_re, j_im = chord_integral(phase[..., 0], phase[..., 1], phase[..., 2])
+        # The phase at t = -1, 0, 1 as three arrays: sliced from one (..., 3) array, their
+        # cotangents met in one loop over that short axis, into which XLA fused the
+        # derivative rule's moments and evaluated them for each entry (a recomputed block's
+        # reverse pass 4x slower).
+        pm, p0, pp = (
+            _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc[k:k + 1],
+                         _BOTH)[..., 0] for k in range(3))
+        j_re, j_im = chord_integral(pm, p0, pp)
         w = chord_w[:, None, :]
         # One variadic sum, so that the kernel is evaluated once for both parts.
         re, im = _sum_pair(w * j_re, w * j_im)
@@ -442,11 +458,11 @@ def _otf_overlap(aberrations, nu_x, nu_y, field, nodes, remat=False, zero_slope=
             return _otf_overlap_flat(aberrations, xy[0], xy[1], field, n_phi, n_t, dtype,
                                      slope, symmetric)
 
-        # Closed-form chords are not recomputed: their derivative rule's value and moments,
-        # recomputed in the reverse pass, would be recomputed again by XLA in each of the
-        # three cotangents that use them (value_and_grad on the steep tier's grid 2.2x
-        # slower), and stored they take fewer bytes than the Gauss chords' moments.
-        if remat and not closed_form:
+        # Closed-form blocks are recomputed too. Stored (session 100), they raised the
+        # scratch of the default's value_and_grad program, which every tier shares, from 24
+        # to 177 MB, and the Fig. 1 point's value_and_grad from 2.1 to 4.2-5.1 ms (one
+        # core): XLA's CPU runtime maps scratch afresh on every call (merit._REMAT_OTF).
+        if remat:
             one_block = jax.checkpoint(one_block)
 
         re, im = jax.lax.map(one_block, (px, py))

@@ -227,6 +227,38 @@ def test_engine_with_closed_form_chords_matches_gauss(monkeypatch, coefficients)
     assert np.max(np.abs(h_long - h_gauss)) < 1e-13
 
 
+def test_recomputed_closed_form_blocks_match_stored_and_gauss(monkeypatch):
+    """Blocks of closed-form chords recomputed in the reverse pass (``_remat_otf``, as the
+    default's steep and balanced grids run them since session 101) give the stored blocks'
+    value and gradient, and the Gauss chords' (the three phases along each chord enter the
+    kernel as three arrays, and its weighted sum has its own derivative rule)."""
+    ab = jj.Seidel(w020=-6.0, w131=4.0, w222=3.0, w040=2.0)
+    rng = np.random.default_rng(5)
+    radius, angle = np.sqrt(rng.uniform(0.0, 1.1, 1100)), rng.uniform(0.0, np.pi, 1100)
+    nu_x, nu_y = jnp.asarray(radius * np.cos(angle)), jnp.asarray(radius * np.sin(angle))
+
+    def run(order, remat):
+        monkeypatch.setattr(_otf, "_CLOSED_FORM_ORDER", order)
+        jax.clear_caches()
+
+        def loss(a, field):
+            h = _otf._otf_overlap(a, nu_x, nu_y, field, (16, 64), remat=remat)
+            return jnp.sum(jnp.abs(h) ** 2 * (1.0 + nu_x))
+
+        value, grads = jax.jit(jax.value_and_grad(loss, argnums=(0, 1)))(ab, 0.9)
+        return float(value), np.array(jax.tree_util.tree_leaves(grads))
+
+    assert 1100 > _otf._OVERLAP_BLOCK * 1024 // (16 * _otf._CLOSED_FORM_BLOCK_ORDER)
+    v_remat, g_remat = run(64, True)
+    v_stored, g_stored = run(64, False)
+    v_gauss, g_gauss = run(65, True)
+    jax.clear_caches()
+    assert v_remat == pytest.approx(v_stored, rel=1e-14)
+    np.testing.assert_allclose(g_remat, g_stored, rtol=1e-13, atol=1e-15)
+    assert v_remat == pytest.approx(v_gauss, rel=1e-12)
+    np.testing.assert_allclose(g_remat, g_gauss, rtol=1e-12, atol=1e-13)
+
+
 def _even_cases():
     """(p0, gamma) in waves: gamma over 14 decades of both signs, the series' end
     (|gamma| = 1) and zero, p0 over 60 waves."""

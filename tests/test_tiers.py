@@ -538,6 +538,19 @@ def test_default_gradient_matches_finite_differences_in_the_top_tier():
     assert float(grad) == pytest.approx((f[0] - f[1]) / (2 * h), rel=1e-6)
 
 
+def test_default_value_and_grad_scratch_stays_small():
+    """Every tier, one-ray plan and shortcut grid sits in the one ``value_and_grad``
+    program, whose scratch is sized for its largest branch, and XLA's CPU runtime maps
+    scratch afresh on every call above about 32 MB, so the Fig. 1 point pays for the
+    strongest grids' storage (``_merit._REMAT_OTF``). Session 100 stored the closed-form
+    chords' blocks of the steep and balanced grids: 177 MB, and that point's
+    ``value_and_grad`` 2.1 -> 4.2-5.1 ms (one core). Recomputed: 24 MB."""
+    ab, field, u, _ = DESIGNS[0]
+    compiled = _default_value_and_grad.lower(ab, field, u, SIGNAL, NOISE).compile()
+    scratch = compiled.memory_analysis().temp_size_in_bytes
+    assert scratch < 32e6, scratch
+
+
 def test_vmap_over_designs_in_different_tiers(monkeypatch, vectorised_vmap):
     """The tiers' vectorised dispatch (a GPU's ``vmap``), value only, on ``SMALL_TIERS``
     (the default's own tiers, with ``value_and_grad``, compile for minutes: the slow
