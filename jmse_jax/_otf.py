@@ -82,7 +82,10 @@ _OVERLAP_BLOCK = 128
 #: the closed form's larger blocks and no recomputation, the switch at 32 measured in the
 #: default itself (``ab_compare.py``, bank cases): tier 3 ``hypercube_2`` 73.3 / 207 -> 75.6
 #: / 191 ms, ``wide_u1_strong`` 76.5 / 220 -> 77.8 / 212 ms, tier 2 ``fig1_u_0.5`` 29.4 /
-#: 87.5 -> 32.5 / 87.2 ms: no clear gain, so 64 stands.
+#: 87.5 -> 32.5 / 87.2 ms: no clear gain, so 64 stands. Since session 101 closed-form
+#: blocks are recomputed in the reverse pass (``_otf_overlap``) and their value no longer
+#: evaluates the kernel twice under differentiation (``_sum_pair``); the switch was not
+#: measured again since.
 _CLOSED_FORM_ORDER = 64
 #: The order along the chords that sizes the overlap engine's blocks when the chords are
 #: integrated in closed form.
