@@ -84,8 +84,9 @@ _OVERLAP_BLOCK = 128
 #: / 191 ms, ``wide_u1_strong`` 76.5 / 220 -> 77.8 / 212 ms, tier 2 ``fig1_u_0.5`` 29.4 /
 #: 87.5 -> 32.5 / 87.2 ms: no clear gain, so 64 stands. Since session 101 closed-form
 #: blocks are recomputed in the reverse pass (``_otf_overlap``) and their value no longer
-#: evaluates the kernel twice under differentiation (``_sum_pair``); the switch was not
-#: measured again since.
+#: evaluates the kernel twice under differentiation (``_sum_pair``); the switch at 32
+#: measured again then (one core, ``ab_compare.py``, 64 -> 32): ``hypercube_2`` 80.9 /
+#: 225 -> 81.9 / 241 ms, ``fig1_u_0.5`` 32.3 / 86.3 -> 33.4 / 92.4 ms. 64 stands.
 _CLOSED_FORM_ORDER = 64
 #: The order along the chords that sizes the overlap engine's blocks when the chords are
 #: integrated in closed form.
