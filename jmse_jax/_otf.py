@@ -78,15 +78,11 @@ _OVERLAP_BLOCK = 128
 #: Gauss -> closed form, one core): the steep tier's grid, order 64, 182 / 373 -> 131 / 340
 #: ms; the balanced grid, 96, 402 / 792 -> 237 / 544 ms; ``HIGH_STEEP_GRID``, 80, 443 / 1119
 #: -> 390 / 1082 ms; but tier 3's grid, 40, 74 / 183 -> 79 / 196 ms, and ``"high"``'s own,
-#: 48, 67 / 156 -> 66 / 203 ms (benchmarks/README.md, optimisation log, session 100). With
-#: the closed form's larger blocks and no recomputation, the switch at 32 measured in the
-#: default itself (``ab_compare.py``, bank cases): tier 3 ``hypercube_2`` 73.3 / 207 -> 75.6
-#: / 191 ms, ``wide_u1_strong`` 76.5 / 220 -> 77.8 / 212 ms, tier 2 ``fig1_u_0.5`` 29.4 /
-#: 87.5 -> 32.5 / 87.2 ms: no clear gain, so 64 stands. Since session 101 closed-form
-#: blocks are recomputed in the reverse pass (``_otf_overlap``) and their value no longer
-#: evaluates the kernel twice under differentiation (``_sum_pair``); the switch at 32
-#: measured again then (one core, ``ab_compare.py``, 64 -> 32): ``hypercube_2`` 80.9 /
-#: 225 -> 81.9 / 241 ms, ``fig1_u_0.5`` 32.3 / 86.3 -> 33.4 / 92.4 ms. 64 stands.
+#: 48, 67 / 156 -> 66 / 203 ms (benchmarks/README.md, optimisation log, session 100).
+#: The switch at 32, measured in the default with the blocks as they now are (recomputed
+#: in the reverse pass; one core, ``ab_compare.py``, 64 -> 32): tier 3 ``hypercube_2``
+#: 80.9 / 225 -> 81.9 / 241 ms, tier 2 ``fig1_u_0.5`` 32.3 / 86.3 -> 33.4 / 92.4 ms (log,
+#: sessions 100-101), so 64 stands.
 _CLOSED_FORM_ORDER = 64
 #: The order along the chords that sizes the overlap engine's blocks when the chords are
 #: integrated in closed form.
@@ -342,8 +338,6 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype, zero_sl
     frac, w_frac, t_colloc, interp, moment = (
         jnp.asarray(a, dtype) for a in rule(n_phi, n_t, chord_points)
     )
-    if exact:  # the phase at t = -1, 0, 1 fixes the quadratic; exact along t
-        t_colloc = jnp.asarray([-1.0, 0.0, 1.0], dtype)
     if even_exact:  # the phase at t = 0 and 1 fixes p0 + gamma t^2
         t_colloc = jnp.asarray([0.0, 1.0], dtype)
     s = safe_norm(nu_x, nu_y)
@@ -372,13 +366,13 @@ def _otf_overlap_flat(aberrations, nu_x, nu_y, field, n_phi, n_t, dtype, zero_sl
             re = _even_phase_integral(phase[:, 0], 2.0 * chord_w, interp, moment)
         im = jnp.zeros_like(re)
     elif exact:
-        # The phase at t = -1, 0, 1 as three arrays: sliced from one (..., 3) array, their
-        # cotangents met in one loop over that short axis, into which XLA fused the
-        # derivative rule's moments and evaluated them for each entry (a recomputed block's
-        # reverse pass 4x slower).
+        # The phase at t = -1, 0, 1 (which fixes the quadratic) as three arrays: sliced
+        # from one (..., 3) array, their cotangents met in one loop over that short axis,
+        # into which XLA fused the derivative rule's moments and evaluated them for each
+        # entry (a recomputed block's reverse pass 4x slower).
         pm, p0, pp = (
-            _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi, t_colloc[k:k + 1],
-                         _BOTH)[..., 0] for k in range(3))
+            _chord_phase(aberrations, field, nx, ny, ex, ey, a, sin_phi,
+                         jnp.asarray([t], dtype), _BOTH)[..., 0] for t in (-1.0, 0.0, 1.0))
         j_re, j_im = chord_integral(pm, p0, pp)
         w = chord_w[:, None, :]
         # One variadic sum, so that the kernel is evaluated once for both parts.
