@@ -1040,9 +1040,8 @@ DEGREE_PLAN_DESIGNS = {
 # test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes, and "overlap" (with
 # the Z28 test above) keeps a value check of the balanced plan of Zernike programs here.
 @pytest.mark.parametrize("name", [
-    pytest.param("angular", marks=pytest.mark.slow),
-    pytest.param("fine", marks=pytest.mark.slow),
-    "overlap"])
+    pytest.param(name, marks=pytest.mark.slow) if name in ("angular", "fine") else name
+    for name in sorted(DEGREE_PLAN_DESIGNS)])
 def test_default_balanced_plan_beyond_seidel_degree_holds_the_climbed_designs(name):
     """The default within 1e-5 of a finer polar grid on three designs that session 82's
     climbs found in the balanced plan of Zernike programs (``default_climb.py --family
