@@ -2027,7 +2027,9 @@ def jmse(
     above ``CHECKED_SNR`` (2e6; ``CHECKED_SNR_PEAKS``, 2e8, with ``peaks`` outside the
     default's tiers, as in ``"high"``, or for a rotationally symmetric design, whose one-ray
     plan integrates them in closed form): narrow features of ``S_e`` then outgrow the grids
-    (docs/accuracy.md, "Accuracy at low noise").
+    (docs/accuracy.md, "Accuracy at low noise"). With the design traced (your ``jit`` or
+    ``vmap``) and ``u`` and the spectra concrete, the ratio's warning is given when the
+    call is traced, past ``CHECKED_SNR`` for any design with ``"fast"`` and the default.
     Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
     under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u <= 0``, the
     spectra's parameters) give ``+inf`` (never NaN) with zero gradient. A traced ``u`` above
@@ -2078,6 +2080,10 @@ def jmse(
         # Differentiated outside jit (an eager jax.grad, jax.jvp): the same warnings.
         choice = tuple(x.item() for x in _concrete_choice(static, *primal))
         _warn_design(static, primal, choice, stacklevel=3)
+    elif preset_grid and is_concrete((u, signal, noise)):
+        # Under jit or vmap with u and the spectra concrete: the peak ratio's warning, once
+        # when the call is traced (the design's own warnings need its values).
+        _warn_snr_of_traced_design(static, u, signal, noise, stacklevel=3)
     try:
         if primal is not None and gradient_static is None and not watch:
             # Only the grid this design takes is compiled and differentiated.
@@ -2723,15 +2729,31 @@ def otf_radial_for(u, signal, noise) -> int:
     return _table_count(OTF_RADIAL_BY_SNR, float(_peak_snr(u, signal, noise)))
 
 
+def _warn_snr_of_traced_design(static, u, signal, noise, stacklevel):
+    """``_warn_beyond_checked_snr`` for a ``jmse`` call with a preset's grids whose design
+    is traced (the caller's ``jit`` or ``vmap``) while ``u`` and the spectra are concrete:
+    the ratio is known when the call is traced, so the warning costs nothing at run time.
+    Whether the design takes a one-ray plan (held to ``CHECKED_SNR_PEAKS``, as ``"high"``
+    is) is not known then: ``"fast"`` and the default warn past ``CHECKED_SNR`` and say that
+    a rotationally symmetric design is held further. ``stacklevel``: ``warnings.warn``'s,
+    here (2 names the line that called this)."""
+    with jax.ensure_compile_time_eval():  # concrete even inside the caller's jit
+        _warn_beyond_checked_snr(u, signal, noise, stacklevel + 1,
+                                 peaks=_snr_peaks(static.value[0]["peaks"], static.value[1]),
+                                 traced_design=True)
+
+
 def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient=False,
-                             se_angular=None, otf_radial=None):
+                             se_angular=None, otf_radial=None, traced_design=False):
     """A ``UserWarning`` when the concrete spectra's peak ``S_x / S_n`` exceeds
     ``CHECKED_SNR`` (for calls with a preset's grids), or ``CHECKED_SNR_PEAKS`` with the
     closed-form peaks (``peaks``: ``_snr_peaks`` of the options, or a one-ray plan).
     ``gradient`` (``optimise``, which follows the gradient): with the peaks, a warning
     between the two bounds too unless ``se_angular`` and ``otf_radial`` (the options) are
     at least ``_counts_for_snr``'s, since ``"high"``'s own counts hold its gradient off the
-    axis only to ``CHECKED_SNR``."""
+    axis only to ``CHECKED_SNR``. ``traced_design``: the design is traced
+    (``_warn_snr_of_traced_design``), and the warning past ``CHECKED_SNR`` says that a
+    rotationally symmetric one is held to ``CHECKED_SNR_PEAKS``."""
     snr = float(_peak_snr(u, signal, noise))
     given = dict(se_angular=se_angular or 0, otf_radial=otf_radial or 0)
     needed = _counts_for_snr(snr)
@@ -2775,7 +2797,11 @@ def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient
             f"off the axis under a power-law spectrum, its gradient 1e-1; "
             f"benchmarks/low_noise.py, default_climb.py --noise). Use preset='high' "
             f"(checked to {CHECKED_SNR_PEAKS:.0e}), or give finer se_nodes and compare two "
-            f"of them",
+            f"of them"
+            + (f". The design is traced here (jit or vmap), so this is said for any design: "
+               f"a rotationally symmetric one (on the axis), which takes the one-ray plan, "
+               f"was checked to {CHECKED_SNR_PEAKS:.0e}"
+               if traced_design and snr <= CHECKED_SNR_PEAKS else ""),
             UserWarning, stacklevel=stacklevel)
 
 

@@ -1209,6 +1209,43 @@ def test_noise_beyond_the_checked_snr_warns():
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-5), peaks=True)
 
 
+def test_traced_design_with_concrete_spectra_warns_beyond_the_checked_snr():
+    """Under the caller's jit or vmap the design is traced, but a u and spectra closed over
+    are concrete: the peak ratio's warning is given when the call is traced (session 104
+    found a jitted value_and_grad of the default's steep tier at 1.0e10 4.7e-4 off the
+    converged gradient without a word). It cannot tell a rotationally symmetric design,
+    held to CHECKED_SNR_PEAKS, from others, and says so between the two bounds. Tracing
+    alone (make_jaxpr) gives it."""
+    signal = jj.MarkovSignal(1.0, 5.0)  # S_x(0) = 157.08: noise 1e-5 is a ratio of 1.57e7
+
+    def traced(noise, **options):
+        def merit(c):
+            return jj.jmse(jj.Seidel(w020=c[0], w222=c[1]), 0.1, 0.2, signal,
+                           jj.WhiteNoise(noise), **options)
+        return jax.make_jaxpr(merit)(jnp.array([6.0, 0.5]))
+
+    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+07 is beyond what the polar "
+                                         r"grids of 'fast' and the default.*The design is "
+                                         r"traced here \(jit or vmap\).*a rotationally "
+                                         r"symmetric one \(on the axis\), which takes the "
+                                         r"one-ray plan, was checked to 2e\+08"):
+        traced(1e-5, preset="fast")
+    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond what the grids "
+                                         r"with closed-form peaks"):
+        traced(1e-8, preset="high")
+    with pytest.warns(UserWarning, match=r"1\.57e\+10 is beyond what the polar grids") as caught:
+        traced(1e-8, preset="fast")
+    assert all("The design is traced" not in str(w.message) for w in caught)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        traced(1e-4, preset="fast")  # inside CHECKED_SNR
+        traced(1e-5, preset="high")  # high takes its counts, and is held to 2e8
+        traced(1e-7, nodes=(8, 4), se_nodes=(16, 8), overlap_nodes=(8, 8))  # own grids
+        # Traced spectra: no ratio when the call is traced (high checks it at run time).
+        jax.make_jaxpr(lambda n: jj.jmse(jj.Seidel(w020=6.0), 0.1, 0.2, signal,
+                                         jj.WhiteNoise(n), preset="fast"))(1e-7)
+
+
 def test_traced_band_past_u_max_is_computed(fig1):
     """Under jit a band past U_MAX is computed, not +inf: lens_merit scales u to other
     wavelengths (u s, s = lambda N / reference) and may pass 1.5. The merit grows with the
