@@ -144,6 +144,14 @@ def _symmetry_oracle(i, x, n_c, fd):
     return None
 
 
+def _zero_terms(x, n_c, rng) -> list[int]:
+    """The zero coefficients of a Zernike design ``x`` that are differenced: up to
+    ``ZERO_TERMS`` of them, drawn from ``rng``."""
+    zeros = [i for i in range(n_c) if x[i] == 0.0]
+    return sorted(int(i) for i in rng.choice(zeros, size=min(ZERO_TERMS, len(zeros)),
+                                             replace=False))
+
+
 def run_one(preset: str, designs: list[dict], family: str, rng, skip: int = 0) -> dict:
     """``skip``: leave out the first designs, drawing their zero terms (``rng``) all the
     same, so that the others are differenced as in a run of all of them."""
@@ -164,8 +172,7 @@ def run_one(preset: str, designs: list[dict], family: str, rng, skip: int = 0) -
         x = np.array(list(d["coefficients"]) + [d[name] for name in SCALAR_NAMES])
         if k < skip:
             if family == "zernike":
-                zeros = [i for i in range(n_c) if x[i] == 0.0]
-                rng.choice(zeros, size=min(ZERO_TERMS, len(zeros)), replace=False)
+                _zero_terms(x, n_c, rng)  # drawn all the same: the later draws stay
             continue
         value, gradient = evaluate(x)
         finite = bool(np.isfinite(value) and np.all(np.isfinite(gradient)))
@@ -176,9 +183,7 @@ def run_one(preset: str, designs: list[dict], family: str, rng, skip: int = 0) -
         coordinates = list(range(n_c, len(x)))
         if family == "zernike":
             nonzero = [i for i in range(n_c) if x[i] != 0.0]
-            zeros = [i for i in range(n_c) if x[i] == 0.0]
-            picked = rng.choice(zeros, size=min(ZERO_TERMS, len(zeros)), replace=False)
-            coordinates = nonzero + sorted(int(i) for i in picked) + coordinates
+            coordinates = nonzero + _zero_terms(x, n_c, rng) + coordinates
         else:
             coordinates = list(range(n_c)) + coordinates
         fd, skipped, steps, broken, polar = {}, {}, {}, [], {}
