@@ -6,6 +6,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import functools
 import math
 import warnings
@@ -21,6 +23,7 @@ from ._aberrations import AbstractAberrations, Seidel, Zernike
 from ._numerics import (
     EXACT,
     all_finite,
+    batch_skipping_cond,
     check_choice,
     check_count,
     check_finite_tree,
@@ -2030,6 +2033,11 @@ def jmse(
     (docs/accuracy.md, "Accuracy at low noise"). With the design traced (your ``jit`` or
     ``vmap``) and ``u`` and the spectra concrete, the ratio's warning is given when the
     call is traced, past ``CHECKED_SNR`` for any design with ``"fast"`` and the default.
+    The design's own warnings (and the ratio's, with the spectra traced) are then given
+    when the program runs, in words that name the bound rather than the design's values,
+    so that Python's filters show each once: the program computes the strength, slope,
+    cancellation and ratio as a concrete call does and calls the host only for a design
+    beyond them (once per ``vmap`` batch).
     Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
     under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u <= 0``, the
     spectra's parameters) give ``+inf`` (never NaN) with zero gradient. A traced ``u`` above
@@ -2084,6 +2092,10 @@ def jmse(
         # Under jit or vmap with u and the spectra concrete: the peak ratio's warning, once
         # when the call is traced (the design's own warnings need its values).
         _warn_snr_of_traced_design(static, u, signal, noise, stacklevel=3)
+    # Otherwise the design (and, with u or the spectra traced, the peak ratio unless
+    # "high"'s low-noise check watches it) is checked when the program runs.
+    check = (not watch and not is_concrete((u, signal, noise))
+             if preset_grid and primal is None and not _CHECKED_ALREADY.get() else None)
     try:
         if primal is not None and gradient_static is None and not watch:
             # Only the grid this design takes is compiled and differentiated.
@@ -2097,7 +2109,7 @@ def jmse(
             # cannot see: the program's inputs carry a refusal that the outer derivative
             # meets first, as soon as it linearizes.
             inputs = refuse_reverse_over(inputs, _REVERSE_OVER_DERIVATIVE)
-        return _traced_entry(static, inputs, gradient_static, watch)
+        return _traced_entry(static, inputs, gradient_static, watch, check)
     except ValueError as error:  # raised while tracing: costs nothing at run time
         if _SECOND_REVERSE not in str(error):
             raise
@@ -2151,19 +2163,19 @@ _SECOND_REVERSE = "Linearization failed to produce known values"
 SEQUENTIAL_VMAP_BACKENDS = ("cpu",)
 
 
-def _traced_entry(static, inputs, gradient_static=None, watch=False):
+def _traced_entry(static, inputs, gradient_static=None, watch=False, check=None):
     """``_traced_merit``, run design by design under ``vmap`` on the backends of
     ``SEQUENTIAL_VMAP_BACKENDS`` (the default backend's, at trace time), with the gradient
-    of ``gradient_static`` and the run-time check ``watch`` when ``jmse`` asks
+    of ``gradient_static`` and the run-time checks ``watch`` and ``check`` when ``jmse`` asks
     for them (``_merit_with_rule``)."""
     sequential = jax.default_backend() in SEQUENTIAL_VMAP_BACKENDS
-    if not sequential and gradient_static is None and not watch:
+    if not sequential and gradient_static is None and not watch and check is None:
         return _traced_merit(static, inputs)
-    return _merit_with_rule(static, gradient_static, watch, sequential, inputs)
+    return _merit_with_rule(static, gradient_static, watch, sequential, check, inputs)
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 2, 3))
-def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
+@functools.partial(jax.jit, static_argnums=(0, 1, 2, 3, 4))
+def _merit_with_rule(static, gradient_static, watch, sequential, check, inputs):
     """``_traced_merit(static, inputs)`` under a derivative rule of its own: with
     ``sequential`` its ``vmap`` runs design by design, for the value and for first
     derivatives alike; with ``gradient_static`` (``_raised``: more angular fine S_e
@@ -2172,7 +2184,9 @@ def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
     ``value_and_grad`` plus this value); with ``watch`` every value and every gradient
     checks the peak ``S_x / S_n`` and warns beyond ``CHECKED_SNR`` (``_warn_traced_snr``;
     a host callback, about 0.1 ms; a value alone warns only where the radial OTF nodes,
-    which hold values, fall short).
+    which hold values, fall short); with ``check`` (None, or whether the peak ratio is
+    checked too) every value and gradient checks its designs (``_design_check``; the host
+    is called only for designs beyond the checked range).
 
     Jitted, as ``_traced_merit`` is: a transformation applied without ``jit`` then traces
     the wrappers once and reuses the program (an eager ``jax.grad`` of the Fig. 1 point
@@ -2192,11 +2206,16 @@ def _merit_with_rule(static, gradient_static, watch, sequential, inputs):
     own = tuple(_own_counts(static.value[0]).items()) if watch else None
 
     def checked(inputs, value, gradient=None):
-        """``value`` (and ``gradient``, a list of arrays) once the check has run."""
-        if not watch:
+        """``value`` (and ``gradient``, a list of arrays) once the checks have run."""
+        if not watch and check is None:
             return value, gradient
-        zero = _run_time_zero(functools.partial(_warn_traced_snr, own, gradient is not None),
-                              _peak_snr(*inputs[2:]))
+        zero = jnp.zeros((), value.dtype)
+        if watch:
+            zero = zero + _run_time_zero(
+                functools.partial(_warn_traced_snr, own, gradient is not None),
+                _peak_snr(*inputs[2:])).astype(value.dtype)
+        if check is not None:
+            zero = zero + _design_check(static, check, inputs).astype(value.dtype)
         # The zero goes into every output, so the check runs whichever is used (a jax.grad
         # drops the value, and a pure callback whose result is unused is dropped with it);
         # into the gradient as a factor 1 + 0, so that its derivatives (a jax.hessian) use
@@ -2253,6 +2272,86 @@ def _run_time_zero(check, snr):
 
     return jax.pure_callback(host, jax.ShapeDtypeStruct(snr.shape, snr.dtype), snr,
                              vmap_method="expand_dims")
+
+
+#: The columns of ``_design_check``'s statistics, one row per design.
+_CHECK_STATS = ("in_range", "symmetric", "strength", "cancellation", "u", "snr")
+
+
+def _design_check(static, snr, inputs):
+    """A zero that carries the run-time check of a traced ``jmse`` call with a preset's
+    grids (``jmse``'s ``check``): the warnings a concrete call gives its design
+    (``_warn_design``: strength, wavefront slope, cancelling terms) and, with ``snr``, the
+    peak ``S_x / S_n`` (past ``CHECKED_SNR``, or ``CHECKED_SNR_PEAKS`` for a one-ray plan or
+    the peaks), computed in the program from the design as the concrete call computes them.
+    Only a design beyond one of those bounds calls the host (``batch_skipping_cond``: under
+    ``vmap`` one call per batch, and none where no design is beyond), so a call inside the
+    checked range pays the statistics (``_strength``, and ``_cancellation`` from
+    ``CANCELLING_STRENGTH``, which the default's tiers compute as well) and one branch.
+    Out-of-range inputs (``+inf`` values) are left out, and no derivative flows."""
+    safe, ok = _sanitise(jax.lax.stop_gradient(inputs))
+    aberrations, field, u, signal, noise = safe
+    aberrations = aberrations.without_tilt()
+    symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
+    strength = _strength(aberrations, field, u)
+    dtype = strength.dtype
+    cancellation = jax.lax.cond(strength >= CANCELLING_STRENGTH,
+                                lambda *a: _cancellation(*a).astype(dtype),
+                                lambda *_: jnp.ones((), dtype), aberrations, field, u)
+    balanced = static.value[4] is not None
+    strong, steep, cancelling, _ = _beyond_checked(strength, u.astype(dtype), symmetric,
+                                                   cancellation, balanced=balanced, xp=jnp)
+    beyond = strong | steep | cancelling
+    peak = jnp.zeros((), dtype)
+    if snr:
+        peak = _peak_snr(u, signal, noise).astype(dtype)
+        peaks = jnp.asarray(symmetric) | _snr_peaks(static.value[0]["peaks"], static.value[1])
+        beyond = beyond | (peak > jnp.where(peaks, CHECKED_SNR_PEAKS, CHECKED_SNR))
+    stats = jnp.stack([jnp.asarray(x, dtype) for x in (
+        ok, symmetric, strength, cancellation, u, peak)])
+    host = functools.partial(_warn_traced_designs, balanced,
+                             _snr_peaks(static.value[0]["peaks"], static.value[1]), snr)
+    zero = batch_skipping_cond(ok & beyond, lambda s: _run_time_zero(host, s),
+                               jnp.zeros_like, stats, sequential=False)
+    return jnp.sum(zero)
+
+
+def _warn_traced_designs(balanced, snr_peaks, snr, stats):
+    """The host's part of ``_design_check``: ``stats`` (``_CHECK_STATS``, one row per
+    design of the call or its ``vmap`` batch) -> the warnings ``_warn_design`` gives, one
+    per kind. ``balanced``: the preset has the balanced grid; ``snr_peaks``: its grids have
+    the peaks (``_snr_peaks``); ``snr``: the peak ratio was checked. The texts name the
+    bound, not the design's values, so that Python's warning filters (by default: each text
+    once) keep an optimiser's loop or a sweep from repeating them call after call."""
+    stats = np.asarray(stats, float).reshape(-1, len(_CHECK_STATS))
+    stats = stats[stats[:, 0] > 0]  # out-of-range designs: +inf, no warning
+    if stats.shape[0] == 0:
+        return
+    symmetric, strength, cancellation, u, peak = stats[:, 1:].T
+    symmetric = symmetric > 0
+    strong, steep, cancelling, _ = _beyond_checked(strength, u, symmetric, cancellation,
+                                                   balanced=balanced)
+    for beyond, message in (
+            (strong, _strength_message(_TRACED_DESIGN)),
+            (steep, _slope_message(_TRACED_DESIGN[3:])),
+            (cancelling, _cancellation_message(
+                f"more than {CHECKED_CANCELLATION if balanced else BALANCED_CANCELLATION:g}",
+                balanced))):
+        if beyond.any():
+            warnings.warn(message + _TRACED_SUFFIX, UserWarning, stacklevel=2)
+    if snr:
+        peaks = symmetric | snr_peaks
+        beyond = peak > np.where(peaks, CHECKED_SNR_PEAKS, CHECKED_SNR)
+        if beyond.any():
+            _warn_snr(float(peak[beyond].max()), 3, peaks=bool(peaks[beyond].all()),
+                      shown=_TRACED_DESIGN, suffix=_TRACED_SUFFIX)
+
+
+#: How ``_warn_traced_designs`` names the design, in place of its values.
+_TRACED_DESIGN = "of a design in a traced call"
+_TRACED_SUFFIX = (" (jmse under jit, vmap or grad checks its designs when the program runs; "
+                  "aberration_strength and the spectra, called on the design itself, give "
+                  "the values)")
 
 
 def _low_noise_statics(static, spectra, given, auto):
@@ -2754,14 +2853,24 @@ def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient
     axis only to ``CHECKED_SNR``. ``traced_design``: the design is traced
     (``_warn_snr_of_traced_design``), and the warning past ``CHECKED_SNR`` says that a
     rotationally symmetric one is held to ``CHECKED_SNR_PEAKS``."""
-    snr = float(_peak_snr(u, signal, noise))
+    _warn_snr(float(_peak_snr(u, signal, noise)), stacklevel + 1, peaks=peaks,
+              gradient=gradient, se_angular=se_angular, otf_radial=otf_radial,
+              traced_design=traced_design)
+
+
+def _warn_snr(snr, stacklevel, peaks=False, gradient=False, se_angular=None, otf_radial=None,
+              traced_design=False, shown=None, suffix=""):
+    """``_warn_beyond_checked_snr`` at the peak ratio ``snr`` (a float). ``shown`` replaces
+    ``= <snr>`` in the text and ``suffix`` ends it (the run-time check of a traced call,
+    ``_warn_traced_designs``, whose texts do not change with the values)."""
+    shown = shown or f"= {snr:.3g}"
     given = dict(se_angular=se_angular or 0, otf_radial=otf_radial or 0)
     needed = _counts_for_snr(snr)
     if (peaks and gradient and CHECKED_SNR < snr <= CHECKED_SNR_PEAKS
             and any(given[k] < n for k, n in needed.items())):
         give = ", ".join(f"{k}={n}" for k, n in needed.items() if given[k] < n)
         warnings.warn(
-            f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
+            f"the peak signal-to-noise ratio max S_x/S_n {shown} is beyond what the "
             f"gradients of the polar grids were checked at off the axis with their own "
             f"counts ({CHECKED_SNR:.0e} with preset='high''s {SE_ANGULAR_BY_SNR[0][1]} "
             f"angular fine S_e nodes and {OTF_RADIAL_BY_SNR[0][1]} radial OTF nodes): under "
@@ -2776,19 +2885,19 @@ def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient
     if peaks:
         if snr > CHECKED_SNR_PEAKS:
             warnings.warn(
-                f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
+                f"the peak signal-to-noise ratio max S_x/S_n {shown} is beyond what the "
                 f"grids with closed-form peaks (peaks=True outside the default's tiers, as in "
                 f"preset='high', and the one-ray plans of designs on the axis) were checked at "
                 f"({CHECKED_SNR_PEAKS:.0e}; "
                 f"benchmarks/low_noise.py, default_climb.py --noise, balanced_one_ray.py): "
                 f"the JMSE and its gradient may be off by more than 1e-4 (1e-2 measured at "
                 f"1.6e10 on defocus balanced against spherical aberration). Give finer grids "
-                f"and compare two of them",
+                f"and compare two of them" + suffix,
                 UserWarning, stacklevel=stacklevel)
         return
     if snr > CHECKED_SNR:
         warnings.warn(
-            f"the peak signal-to-noise ratio max S_x/S_n = {snr:.3g} is beyond what the "
+            f"the peak signal-to-noise ratio max S_x/S_n {shown} is beyond what the "
             f"polar grids of 'fast' and the default were checked at ({CHECKED_SNR:.0e}): "
             f"narrow features of S_e (its peaks where the OTF nearly vanishes on a ring, "
             f"near the axis; its turn from S_n/|H|^2 to S_x under a flat signal spectrum) "
@@ -2801,7 +2910,7 @@ def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient
             + (f". The design is traced here (jit or vmap), so this is said for any design: "
                f"a rotationally symmetric one (on the axis), which takes the one-ray plan, "
                f"was checked to {CHECKED_SNR_PEAKS:.0e}"
-               if traced_design and snr <= CHECKED_SNR_PEAKS else ""),
+               if traced_design and snr <= CHECKED_SNR_PEAKS else "") + suffix,
             UserWarning, stacklevel=stacklevel)
 
 
@@ -2850,17 +2959,18 @@ def _cancellation_message(which: str, balanced: bool) -> str:
             f"see jmse's docstring)")
 
 
-def _beyond_checked(strength, u, symmetric, cancellation=1.0, balanced=False):
+def _beyond_checked(strength, u, symmetric, cancellation=1.0, balanced=False, xp=np):
     """``(strength beyond, slope beyond, cancelling beyond, slope)`` for designs (arrays or
     scalars) of the given ``aberration_strength``, ``u``, symmetry and ``_cancellation``
     (each design gets at most one of the three); ``balanced``: the preset has the balanced
     tier (checked to ``CHECKED_CANCELLATION``), else designs that would take it are beyond
-    (from ``BALANCED_CANCELLATION``)."""
-    strength, u, symmetric = np.asarray(strength), np.asarray(u), np.asarray(symmetric, bool)
-    slope = strength / np.asarray(_band_reach(u), strength.dtype)
-    strong = strength > np.where(symmetric, CHECKED_STRENGTH_ONE_RAY, CHECKED_STRENGTH)
+    (from ``BALANCED_CANCELLATION``). ``xp``: ``np`` on the host, ``jnp`` for traced
+    values (``_design_check``)."""
+    strength, u, symmetric = xp.asarray(strength), xp.asarray(u), xp.asarray(symmetric, bool)
+    slope = strength / xp.asarray(_band_reach(u), strength.dtype)
+    strong = strength > xp.where(symmetric, CHECKED_STRENGTH_ONE_RAY, CHECKED_STRENGTH)
     steep = ~strong & (slope > CHECKED_SLOPE)
-    cancellation = np.asarray(cancellation)
+    cancellation = xp.asarray(cancellation)
     # With the balanced tier: beyond its checked bound, to rounding (r = -2/3 gives 7 + 3e-15)
     # and to what a trace of astigmatism adds in a Zernike design's Seidel form (the same
     # design with 1e-7 waves: 7 + 2e-8; ``Zernike.seidel_like_terms``).
@@ -2868,6 +2978,27 @@ def _beyond_checked(strength, u, symmetric, cancellation=1.0, balanced=False):
               else _balancing(strength, cancellation))
     cancelling = ~strong & ~steep & ~symmetric & (strength >= CANCELLING_STRENGTH) & beyond
     return strong, steep, cancelling, slope
+
+
+def beyond_message(message, value: float, beyond: int = 1, n: int = 1) -> str:
+    """``message`` (the strength, slope or cancellation warning) for the largest ``value``
+    among ``beyond`` of ``n`` designs."""
+    return message(f"{value:.3g}" if n == 1 else f"up to {value:.3g} ({beyond} of {n} designs)")
+
+
+#: Set (``_checked_already``) by a caller that gave ``warn_like_jmse``'s warnings itself
+#: (``sweep_jmse``, the command line): ``jmse`` calls traced meanwhile then carry no
+#: run-time check of their designs (``_design_check``), so they are not given twice.
+_CHECKED_ALREADY = contextvars.ContextVar("jmse_jax_checked_already", default=False)
+
+
+@contextlib.contextmanager
+def _checked_already():
+    token = _CHECKED_ALREADY.set(True)
+    try:
+        yield
+    finally:
+        _CHECKED_ALREADY.reset(token)
 
 
 def _warn_design(static, inputs, choice, stacklevel):

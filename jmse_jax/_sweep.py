@@ -12,7 +12,6 @@ order, with the inputs kept beside them and a status per design.
 from __future__ import annotations
 
 import contextlib
-import contextvars
 import dataclasses
 import enum
 import functools
@@ -37,10 +36,12 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._aberrations import Seidel
 from ._merit import (
+    _CHECKED_ALREADY,
     _GRID_OPTIONS,
     U_MAX,
     _beyond_checked,
     _cancellation_message,
+    _checked_already,
     _chooses_counts,
     _concrete_choice,
     _peak_snr,
@@ -49,6 +50,7 @@ from ._merit import (
     _snr_peaks,
     _strength_message,
     _warn_beyond_checked_snr,
+    beyond_message,
     jmse,
     jmse_options,
 )
@@ -795,26 +797,6 @@ def hypercube(**axes) -> dict[str, np.ndarray]:
 #: Designs per evaluation of ``_concrete_choice`` in ``warn_like_jmse`` (batches of fewer
 #: take the next power of two, so that few programs are compiled).
 _CHECK_CHUNK = 1024
-#: Set (``_checked_already``) by a caller that gave ``warn_like_jmse``'s warnings itself,
-#: so that ``sweep_jmse`` does not give them twice (the command line prints them first).
-_CHECKED_ALREADY = contextvars.ContextVar("jmse_jax_checked_already", default=False)
-
-
-@contextlib.contextmanager
-def _checked_already():
-    token = _CHECKED_ALREADY.set(True)
-    try:
-        yield
-    finally:
-        _CHECKED_ALREADY.reset(token)
-
-
-def beyond_message(message, value: float, beyond: int = 1, n: int = 1) -> str:
-    """``message`` (``_merit``'s strength, slope or cancellation warning) for the largest
-    ``value`` among ``beyond`` of ``n`` designs."""
-    return message(f"{value:.3g}" if n == 1 else f"up to {value:.3g} ({beyond} of {n} designs)")
-
-
 @functools.lru_cache(maxsize=16)
 def _choice_program(static):
     """The compiled batch of ``_concrete_choice`` for ``jmse``'s static ``static``:
@@ -829,7 +811,8 @@ def _choice_program(static):
 
 def warn_like_jmse(aberrations, field, u, signal, noise, options, stacklevel: int = 2):
     """The warnings an eager ``jmse`` call gives a concrete design, for a batch of designs
-    that run traced (under ``vmap`` ``jmse`` cannot give them): ``aberration_strength``
+    that run traced (under ``vmap`` ``jmse`` gives them only when the program runs, without
+    the values: ``_design_check``): ``aberration_strength``
     beyond ``CHECKED_STRENGTH``, the wavefront slope beyond ``CHECKED_SLOPE``, terms that
     cancel beyond what the preset was checked at (``BALANCED_CANCELLATION``, or
     ``CHECKED_CANCELLATION`` with a preset's balanced grid: the default's and ``"high"``'s),
@@ -1003,18 +986,24 @@ def sweep_jmse(
     field = np.asarray(field, float) if isinstance(field, (list, tuple)) else field
     u = np.asarray(u, float) if isinstance(u, (list, tuple)) else u
     options = _with_sweep_counts(preset, options, resolved, u, signal, noise)
-    if not _CHECKED_ALREADY.get() and is_concrete((aberrations, field, u)):
-        # Under vmap jmse cannot give its warnings for concrete designs: given here.
+    checked = _CHECKED_ALREADY.get()
+    if not checked and is_concrete((aberrations, field, u)):
+        # Under vmap jmse gives its warnings only when the program runs, without the
+        # designs' values: given here, with them, before anything is compiled.
         warn_like_jmse(aberrations, field, u, signal, noise, dict(options, preset=preset),
                        stacklevel=3)
+        checked = True
 
     def in_range(design):
         f, v = design["field"], design["u"]
         return (f >= 0.0) & (f <= 1.0) & (v > 0.0) & (v <= U_MAX)
 
     def merit(design):
-        value = jmse(design["aberrations"], design["field"], design["u"], signal, noise,
-                     preset=preset, **options)
+        # Given above, the warnings are not checked again at run time (jmse's
+        # _design_check); the context is set where the program is traced, on any thread.
+        with _checked_already() if checked else contextlib.nullcontext():
+            value = jmse(design["aberrations"], design["field"], design["u"], signal, noise,
+                         preset=preset, **options)
         # An out-of-range design's value is +inf, as its status says, not a finite number
         # that a filter on np.isfinite would keep.
         return jnp.where(in_range(design), value, jnp.inf)

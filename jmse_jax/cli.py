@@ -436,9 +436,15 @@ def _cmd_optimise(args) -> int:
           f"start stop {args.stop_distance} mm, front curvature {args.front_curvature} 1/mm, "
           f"image shift {args.image_shift} mm; merit {args.merit}, preset {args.preset}, "
           f"u = {args.u}; optimising {', '.join(args.variables)} ...", flush=True)
-    result = jj.optimise(start, tuple(args.variables), merit=args.merit, u=args.u,
-                         signal=signal, noise=noise, f_number=jl.PAPER_SINGLET["f_number"],
-                         max_steps=args.max_steps, jmse_options={"preset": args.preset})
+    # jmse checks the designs the optimiser tries when its program runs; their warnings
+    # (one per kind) are printed as this command's, after the run.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = jj.optimise(start, tuple(args.variables), merit=args.merit, u=args.u,
+                             signal=signal, noise=noise, f_number=jl.PAPER_SINGLET["f_number"],
+                             max_steps=args.max_steps, jmse_options={"preset": args.preset})
+    for text in dict.fromkeys(" ".join(str(w.message).split()) for w in caught):
+        print(f"jmse-jax: warning: {text}", file=sys.stderr, flush=True)
     print(result.summary())
     # The JMSE figures above are jmse's at the start's and the result's Seidel waves: the
     # warnings jmse gives such designs (e.g. a large --image-shift) are given here too.
@@ -617,7 +623,8 @@ def _cmd_sweep(args) -> int:
     u = numbers("u", cube.get("u", args.u))
     signal = parse_signal(args.signal)
     noise = jj.WhiteNoise(_positive("--noise", args.noise))
-    # Under vmap jmse cannot give its warnings for concrete designs: give them here.
+    # Under vmap jmse gives its warnings only when the program runs, without the designs'
+    # values: give them here, before the sweep compiles.
     warn_like_jmse(batch_ab, every + field, every + u, signal, noise, args.preset)
     print(f"sweep of {n} designs over {', '.join(f'{k} ({len(v)})' for k, v in axes.items())}; "
           f"preset {args.preset}, grad {args.grad}, {args.dtype}", flush=True)

@@ -9,6 +9,7 @@ import re
 import subprocess
 import sys
 import types
+import warnings
 
 import jax
 import numpy as np
@@ -426,6 +427,30 @@ def test_optimise_warns_as_jmse_does_for_designs_beyond_the_checked_strength(cap
     assert status == 0
     assert err.count("warning: aberration_strength") == 1  # the result, not the start
     assert f"{strength:.3g}" in err
+
+
+def test_optimise_prints_the_warnings_of_the_designs_it_tried_once(capsys, monkeypatch):
+    """The designs the optimiser tries are checked by jmse when its program runs (traced:
+    warnings without values, ``_design_check``); the command prints each text once, as its
+    own warning line, after the run."""
+    from jmse_jax._merit import _TRACED_DESIGN, _strength_message
+
+    text = _strength_message(_TRACED_DESIGN)
+    lens = jl.paper_singlet(1.0, 0.05)
+
+    def fake_optimise(start, variables, **options):
+        for _ in range(3):  # a step of the loop each
+            warnings.warn(text, UserWarning, stacklevel=2)
+        return types.SimpleNamespace(
+            summary=lambda: "optimise: (stand-in)", merit="jmse",
+            parameters={"image_shift": 0.0}, value=1e-2, jmse=1e-2, jmse_per_field=[1e-2],
+            fields=[0.0], rms_wavefront=0.1, start_jmse=1e-2, start_rms_wavefront=0.1,
+            lens=lens, iterations=1, wall_time=0.1, result="successful", solver="bfgs")
+
+    monkeypatch.setattr(jj, "optimise", fake_optimise)
+    status, _, err = run_cli(capsys, "optimise")
+    assert status == 0
+    assert err.count(f"jmse-jax: warning: {' '.join(text.split())}") == 1
 
 
 # --------------------------------------------------------------------------------------

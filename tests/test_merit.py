@@ -1246,6 +1246,98 @@ def test_traced_design_with_concrete_spectra_warns_beyond_the_checked_snr():
                                          jj.WhiteNoise(n), preset="fast"))(1e-7)
 
 
+#: How each kind of design warning starts (``_warn_design``, ``_warn_traced_designs``).
+_WARNING_KINDS = {"aberration_strength": "strength", "the wavefront slope": "slope",
+                  "the terms of the design cancel": "cancellation",
+                  "the peak signal-to-noise": "snr"}
+
+
+def _kinds(caught):
+    """The kinds of design warning among ``caught`` (``warnings.catch_warnings``'s)."""
+    return sorted(kind for w in caught for start, kind in _WARNING_KINDS.items()
+                  if str(w.message).startswith(start))
+
+
+#: (design, field, u, noise, kinds the presets "fast" and "default" warn of): in range;
+#: strong off the axis; as strong on the axis (held to CHECKED_STRENGTH_ONE_RAY); steep at
+#: small u; defocus against astigmatism (cancellation 3: past BALANCED_CANCELLATION, inside
+#: CHECKED_CANCELLATION); a peak ratio of 1.57e7 off the axis and on it (CHECKED_SNR_PEAKS);
+#: out of range (+inf, no warning).
+_CHECK_CASES = [
+    (dict(w020=1.0, w131=0.3), 0.9, 0.2, 1e-3, [], []),
+    (dict(w131=40.0), 0.9, 0.5, 1e-3, ["strength"], ["strength"]),
+    (dict(w020=30.0), 0.0, 0.5, 1e-3, [], []),
+    (dict(w131=30.0), 1.0, 0.1, 1e-3, ["slope"], ["slope"]),
+    (dict(w020=-10.0, w222=20.0), 1.0, 0.5, 1e-3, ["cancellation"], []),
+    (dict(w020=1.0, w131=0.3), 0.9, 0.2, 1e-5, ["snr"], ["snr"]),
+    (dict(w020=1.0), 0.0, 0.2, 1e-5, [], []),
+    (dict(w131=40.0), 1.5, 0.5, 1e-3, [], []),
+]
+
+
+@pytest.mark.parametrize("preset", ["fast", "default"])
+def test_traced_design_check_warns_as_the_concrete_call(preset):
+    """Under the caller's jit, vmap or grad the design is traced, and ``jmse`` checks it
+    when the program runs (``_design_check``): the same kinds of warning as the concrete
+    call's (``_warn_design``, on the host in NumPy: the oracle), for strength, slope,
+    cancelling terms and, with the spectra traced, the peak ratio, each bound on its own
+    side. Checked on the check's own program (the merit's adds nothing to it)."""
+    from jmse_jax._merit import _concrete_choice, _design_check, _prepare, _warn_design
+
+    signal = jj.MarkovSignal(1.0, 5.0)
+    check = None
+    for design, field, u, noise, *expected in _CHECK_CASES:
+        args = (jj.Seidel(**design), min(field, 1.0), u, signal, jj.WhiteNoise(noise))
+        static, inputs = _prepare(args, jj.jmse_options(preset))
+        inputs = (inputs[0], jnp.asarray(field), *inputs[2:])  # past 1: as traced
+        if check is None:  # one program: every case has the same structure
+            check = jax.jit(lambda inputs, static=static: _design_check(static, True, inputs))
+        with warnings.catch_warnings(record=True) as traced:
+            warnings.simplefilter("always")
+            assert float(check(inputs)) == 0.0
+        assert _kinds(traced) == expected[preset == "default"], (design, field, u, noise)
+        if field > 1.0:
+            continue  # the concrete call refuses it
+        with warnings.catch_warnings(record=True) as concrete:
+            warnings.simplefilter("always")
+            choice = tuple(x.item() for x in _concrete_choice(static, *inputs))
+            _warn_design(static, inputs, choice, stacklevel=2)
+        assert _kinds(traced) == _kinds(concrete)
+    assert all(str(w.message).endswith("give the values)") for w in traced)
+
+
+def test_traced_call_checks_its_design_when_it_runs():
+    """A jitted value, a jitted gradient and a vmap batch of ``jmse`` warn of a design beyond
+    the checked strength when they run, once per kind and batch; a design inside gives
+    none, nor do grids of one's own. The value is the concrete call's."""
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+
+    def merit(w020, **options):
+        return jj.jmse(jj.Seidel(w020=w020, w131=0.3), 0.5, 0.2, signal, noise,
+                       **{"preset": "fast", **options})
+
+    strong = 60.0
+    assert float(jj.aberration_strength(jj.Seidel(w020=strong, w131=0.3), 0.5, 0.2)) > (
+        jj.CHECKED_STRENGTH)
+    value = jax.jit(merit)
+    gradient = jax.jit(jax.grad(merit))
+    batch = jax.jit(jax.vmap(merit))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        inside = float(value(1.0))
+        gradient(1.0)
+        batch(jnp.array([1.0, 2.0]))
+        own = dict(nodes=(8, 4), se_nodes=(16, 8), overlap_nodes=(8, 8))
+        jax.jit(lambda w: merit(w, **own))(strong)
+    assert inside == pytest.approx(float(merit(1.0)), rel=1e-13)
+    for fn, arg in ((value, strong), (gradient, strong), (batch, jnp.array([1.0, strong, 70.0]))):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            jax.block_until_ready(fn(arg))
+        assert _kinds(caught) == ["strength"], fn
+        assert "of a design in a traced call is beyond" in str(caught[0].message)
+
+
 def test_traced_band_past_u_max_is_computed(fig1):
     """Under jit a band past U_MAX is computed, not +inf: lens_merit scales u to other
     wavelengths (u s, s = lambda N / reference) and may pass 1.5. The merit grows with the

@@ -474,6 +474,19 @@ def _sweep_warnings(monkeypatch, *args, **options):
     return [(str(w.message), w.filename) for w in caught]
 
 
+def test_sweep_jmse_warns_once_not_again_at_run_time():
+    """``sweep_jmse`` gives its designs' warnings before the sweep, and its program, traced
+    with them given (``_checked_already``), carries no run-time check of its own
+    (``jmse``'s ``_design_check``): one warning, not two."""
+    ab = jj.Seidel(w020=np.array([1.0, 60.0]), w131=0.3)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = jj.sweep_jmse(ab, 0.5, 0.2, SIGNAL, NOISE, preset="fast", progress=False)
+    assert np.all(np.isfinite(result.value))
+    texts = [str(w.message) for w in caught if "aberration_strength" in str(w.message)]
+    assert len(texts) == 1 and "(1 of 2 designs)" in texts[0]
+
+
 def test_sweep_jmse_gives_the_eager_calls_warnings(monkeypatch):
     """Under ``vmap`` ``jmse`` cannot warn for a design beyond what the presets were checked
     at; ``sweep_jmse`` gives the eager call's warning before the sweep, once, with the
