@@ -405,6 +405,15 @@ def test_optimise_reports_the_stop_distance_as_its_flag_takes_it(capsys, tmp_pat
     assert "stop_position" in result["parameters_convention"]
 
 
+def _stand_in_result(lens, image_shift, rms_wavefront):
+    """A stand-in for ``optimise``'s result at ``lens`` (one field, merit 1e-2)."""
+    return types.SimpleNamespace(
+        summary=lambda: "optimise: (stand-in)", merit="jmse",
+        parameters={"image_shift": image_shift}, value=1e-2, jmse=1e-2, jmse_per_field=[1e-2],
+        fields=[0.0], rms_wavefront=rms_wavefront, start_jmse=1e-2, start_rms_wavefront=0.1,
+        lens=lens, iterations=1, wall_time=0.1, result="successful", solver="bfgs")
+
+
 def test_optimise_warns_as_jmse_does_for_designs_beyond_the_checked_strength(capsys,
                                                                            monkeypatch):
     """A huge --image-shift put millions of waves of defocus into the reported JMSE with no
@@ -416,11 +425,7 @@ def test_optimise_warns_as_jmse_does_for_designs_beyond_the_checked_strength(cap
     assert strength > jj.CHECKED_STRENGTH
 
     def fake_optimise(start, variables, **options):
-        return types.SimpleNamespace(
-            summary=lambda: "optimise: (stand-in)", merit="jmse",
-            parameters={"image_shift": 10.0}, value=1e-2, jmse=1e-2, jmse_per_field=[1e-2],
-            fields=[0.0], rms_wavefront=100.0, start_jmse=1e-2, start_rms_wavefront=0.1,
-            lens=lens, iterations=1, wall_time=0.1, result="successful", solver="bfgs")
+        return _stand_in_result(lens, image_shift=10.0, rms_wavefront=100.0)
 
     monkeypatch.setattr(jj, "optimise", fake_optimise)
     status, _, err = run_cli(capsys, "optimise")
@@ -441,11 +446,7 @@ def test_optimise_prints_the_warnings_of_the_designs_it_tried_once(capsys, monke
     def fake_optimise(start, variables, **options):
         for _ in range(3):  # a step of the loop each
             warnings.warn(text, UserWarning, stacklevel=2)
-        return types.SimpleNamespace(
-            summary=lambda: "optimise: (stand-in)", merit="jmse",
-            parameters={"image_shift": 0.0}, value=1e-2, jmse=1e-2, jmse_per_field=[1e-2],
-            fields=[0.0], rms_wavefront=0.1, start_jmse=1e-2, start_rms_wavefront=0.1,
-            lens=lens, iterations=1, wall_time=0.1, result="successful", solver="bfgs")
+        return _stand_in_result(lens, image_shift=0.0, rms_wavefront=0.1)
 
     monkeypatch.setattr(jj, "optimise", fake_optimise)
     status, _, err = run_cli(capsys, "optimise")
