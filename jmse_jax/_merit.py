@@ -2295,22 +2295,20 @@ def _design_check(static, snr, inputs):
     symmetric = aberrations.radially_symmetric(field) if static.value[2] else False
     strength = _strength(aberrations, field, u)
     dtype = strength.dtype
-    cancellation = jax.lax.cond(strength >= CANCELLING_STRENGTH,
-                                lambda *a: _cancellation(*a).astype(dtype),
-                                lambda *_: jnp.ones((), dtype), aberrations, field, u)
+    cancellation = _cancellation_from(strength, aberrations, field, u)
     balanced = static.value[4] is not None
+    snr_peaks = _snr_peaks(static.value[0]["peaks"], static.value[1])
     strong, steep, cancelling, _ = _beyond_checked(strength, u.astype(dtype), symmetric,
                                                    cancellation, balanced=balanced, xp=jnp)
     beyond = strong | steep | cancelling
     peak = jnp.zeros((), dtype)
     if snr:
         peak = _peak_snr(u, signal, noise).astype(dtype)
-        peaks = jnp.asarray(symmetric) | _snr_peaks(static.value[0]["peaks"], static.value[1])
+        peaks = jnp.asarray(symmetric) | snr_peaks
         beyond = beyond | (peak > jnp.where(peaks, CHECKED_SNR_PEAKS, CHECKED_SNR))
     stats = jnp.stack([jnp.asarray(x, dtype) for x in (
         ok, symmetric, strength, cancellation, u, peak)])
-    host = functools.partial(_warn_traced_designs, balanced,
-                             _snr_peaks(static.value[0]["peaks"], static.value[1]), snr)
+    host = functools.partial(_warn_traced_designs, balanced, snr_peaks, snr)
     zero = batch_skipping_cond(ok & beyond, lambda s: _run_time_zero(host, s),
                                jnp.zeros_like, stats, sequential=False)
     return jnp.sum(zero)
@@ -2603,10 +2601,7 @@ def _tier_of(static, aberrations, field, u, signal=None, noise=None, cancelling=
     strength = _strength(aberrations, field, u)
     cancellation = jnp.ones((), strength.dtype)
     if balanced is not None or cancelling:
-        cancellation = jax.lax.cond(
-            strength >= CANCELLING_STRENGTH,
-            lambda *a: _cancellation(*a).astype(strength.dtype),
-            lambda *_: cancellation, aberrations, field, u)
+        cancellation = _cancellation_from(strength, aberrations, field, u)
     # Without tiers (``"high"``) the one fixed grid is plan 0, the steep grid plan 1 (taken,
     # as the default's steep tier, past ``STEEP_SLOPE``) and the balanced grid the last.
     if tiers is not None:
@@ -2644,6 +2639,14 @@ def _tier_of(static, aberrations, field, u, signal=None, noise=None, cancelling=
         balancing = balancing | beyond
     index = jnp.where(balancing, _n_strength_plans(static), index)
     return index.astype(jnp.int32), by_strength, cancellation
+
+
+def _cancellation_from(strength, aberrations, field, u):
+    """``_cancellation`` of a design of this ``aberration_strength``, computed only from
+    ``CANCELLING_STRENGTH`` (1 below it, where nothing looks at it; traceable)."""
+    return jax.lax.cond(strength >= CANCELLING_STRENGTH,
+                        lambda *a: _cancellation(*a).astype(strength.dtype),
+                        lambda *_: jnp.ones((), strength.dtype), aberrations, field, u)
 
 
 def _n_strength_plans(static):
@@ -2978,12 +2981,6 @@ def _beyond_checked(strength, u, symmetric, cancellation=1.0, balanced=False, xp
               else _balancing(strength, cancellation))
     cancelling = ~strong & ~steep & ~symmetric & (strength >= CANCELLING_STRENGTH) & beyond
     return strong, steep, cancelling, slope
-
-
-def beyond_message(message, value: float, beyond: int = 1, n: int = 1) -> str:
-    """``message`` (the strength, slope or cancellation warning) for the largest ``value``
-    among ``beyond`` of ``n`` designs."""
-    return message(f"{value:.3g}" if n == 1 else f"up to {value:.3g} ({beyond} of {n} designs)")
 
 
 #: Set (``_checked_already``) by a caller that gave ``warn_like_jmse``'s warnings itself

@@ -50,7 +50,6 @@ from ._merit import (
     _snr_peaks,
     _strength_message,
     _warn_beyond_checked_snr,
-    beyond_message,
     jmse,
     jmse_options,
 )
@@ -797,6 +796,14 @@ def hypercube(**axes) -> dict[str, np.ndarray]:
 #: Designs per evaluation of ``_concrete_choice`` in ``warn_like_jmse`` (batches of fewer
 #: take the next power of two, so that few programs are compiled).
 _CHECK_CHUNK = 1024
+
+
+def beyond_message(message, value: float, beyond: int = 1, n: int = 1) -> str:
+    """``message`` (``_merit``'s strength, slope or cancellation warning) for the largest
+    ``value`` among ``beyond`` of ``n`` designs."""
+    return message(f"{value:.3g}" if n == 1 else f"up to {value:.3g} ({beyond} of {n} designs)")
+
+
 @functools.lru_cache(maxsize=16)
 def _choice_program(static):
     """The compiled batch of ``_concrete_choice`` for ``jmse``'s static ``static``:
