@@ -37,6 +37,7 @@ from ._merit import (
     OTF_RADIAL_BY_SNR as OTF_RADIAL_BY_SNR,
     OVERLAP_FLOOR as OVERLAP_FLOOR,
     PRESETS as PRESETS,
+    RUN_TIME_CHECKS_VARIABLE as RUN_TIME_CHECKS_VARIABLE,
     SE_ANGULAR_BY_SNR as SE_ANGULAR_BY_SNR,
     STEEP_SLOPE as STEEP_SLOPE,
     WEAK_TIER_SNR as WEAK_TIER_SNR,
@@ -46,6 +47,7 @@ from ._merit import (
     jmse as jmse,
     jmse_options as jmse_options,
     otf_radial_for as otf_radial_for,
+    run_time_checks as run_time_checks,
     se_angular_for as se_angular_for,
 )
 from ._optimise import (

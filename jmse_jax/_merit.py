@@ -10,6 +10,7 @@ import contextlib
 import contextvars
 import functools
 import math
+import os
 import warnings
 from typing import NamedTuple
 
@@ -2094,8 +2095,12 @@ def jmse(
         _warn_snr_of_traced_design(static, u, signal, noise, stacklevel=3)
     # Otherwise the design (and, with u or the spectra traced, the peak ratio unless
     # "high"'s low-noise check watches it) is checked when the program runs.
+    # With run_time_checks(False) neither check is compiled in (no host callback: the
+    # program can be stored in JAX's persistent compilation cache); values are unchanged.
+    checks = _run_time_checks_on()
     check = (not watch and not is_concrete((u, signal, noise))
-             if preset_grid and primal is None and not _CHECKED_ALREADY.get() else None)
+             if checks and preset_grid and primal is None and not _CHECKED_ALREADY.get()
+             else None)
     try:
         if primal is not None and gradient_static is None and not watch:
             # Only the grid this design takes is compiled and differentiated.
@@ -2109,7 +2114,7 @@ def jmse(
             # cannot see: the program's inputs carry a refusal that the outer derivative
             # meets first, as soon as it linearizes.
             inputs = refuse_reverse_over(inputs, _REVERSE_OVER_DERIVATIVE)
-        return _traced_entry(static, inputs, gradient_static, watch, check)
+        return _traced_entry(static, inputs, gradient_static, watch and checks, check)
     except ValueError as error:  # raised while tracing: costs nothing at run time
         if _SECOND_REVERSE not in str(error):
             raise
@@ -2996,6 +3001,69 @@ def _checked_already():
         yield
     finally:
         _CHECKED_ALREADY.reset(token)
+
+
+#: The environment variable that sets the process's default for ``run_time_checks``
+#: (``1`` or ``0``; unset: on).
+RUN_TIME_CHECKS_VARIABLE = "JMSE_JAX_RUN_TIME_CHECKS"
+_RUN_TIME_CHECKS = contextvars.ContextVar("jmse_jax_run_time_checks", default=None)
+_SWITCH_VALUES = {"1": True, "true": True, "on": True, "0": False, "false": False, "off": False}
+
+
+@contextlib.contextmanager
+def run_time_checks(enabled: bool = True):
+    """Whether ``jmse`` calls traced inside the block carry the run-time checks.
+
+    A ``jmse`` call under one's own ``jit``, ``vmap`` or ``grad`` with a preset's grids
+    checks its design when the program runs and warns beyond the checked range (strength,
+    slope, cancelling terms, peak ``S_x / S_n``; ``"high"``'s low-noise counts), through a
+    host callback. JAX does not store a program with a host callback in its persistent
+    compilation cache (``jax_compilation_cache_dir``), so such a program compiles anew in
+    every process (the default's ``value_and_grad``: about 20-40 s on 2 cores). Inside
+    ``run_time_checks(False)`` the program has no callback and is cached; its values and
+    gradients are the same bit for bit, but a design beyond the checked range is not
+    reported: call ``aberration_strength`` or ``jmse`` on concrete designs to see it.
+    Concrete calls, derivatives taken without ``jit`` and ``sweep_jmse`` warn either way
+    (from the values, before anything runs).
+
+    The setting is read when a call is traced (a program traced before is reused as it
+    is). Outside any block the environment variable ``JMSE_JAX_RUN_TIME_CHECKS``
+    (``RUN_TIME_CHECKS_VARIABLE``: ``1`` or ``0``) gives it; unset, the checks are on.
+
+    Examples
+    --------
+    >>> import jax
+    >>> import jmse_jax as jj
+    >>> ab = jj.Seidel(w020=-2.75, w040=1.5578, w131=-1.2602, w222=1.4089, w220=2.7198)
+    >>> merit = jax.jit(lambda w: jj.jmse(ab, w, 0.2, jj.MarkovSignal(1.0, 5.0),
+    ...                                   jj.WhiteNoise(1e-3), preset="fast"))
+    >>> with jj.run_time_checks(False):
+    ...     program = merit.lower(0.95)  # no host callback: cacheable
+    >>> "callback" in program.as_text()
+    False
+    """
+    if not isinstance(enabled, (bool, np.bool_)):
+        raise ValueError(f"run_time_checks: enabled must be True or False, got {enabled!r}")
+    token = _RUN_TIME_CHECKS.set(bool(enabled))
+    try:
+        yield
+    finally:
+        _RUN_TIME_CHECKS.reset(token)
+
+
+def _run_time_checks_on() -> bool:
+    """Whether a ``jmse`` call traced now carries the run-time checks: ``run_time_checks``'
+    setting, else ``JMSE_JAX_RUN_TIME_CHECKS``'s, else on."""
+    enabled = _RUN_TIME_CHECKS.get()
+    if enabled is not None:
+        return enabled
+    value = os.environ.get(RUN_TIME_CHECKS_VARIABLE)
+    if value is None:
+        return True
+    if value.strip().lower() not in _SWITCH_VALUES:
+        raise ValueError(f"the environment variable {RUN_TIME_CHECKS_VARIABLE} must be 1 or 0 "
+                         f"(or true/false, on/off), got {value!r}")
+    return _SWITCH_VALUES[value.strip().lower()]
 
 
 def _warn_design(static, inputs, choice, stacklevel):

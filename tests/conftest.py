@@ -37,6 +37,16 @@ if "--xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = " ".join(
         (os.environ.get("XLA_FLAGS", ""), "--xla_backend_optimization_level=0")).strip()
 
+# The suite's programs carry no run-time design checks (``jmse_jax.run_time_checks``): a
+# program with their host callback is not stored in the persistent cache above, so each
+# process would compile every traced default program again (session 105's check took the
+# suite on the CI machine from 829 to 1057 s). The checks add an exact zero: the values and
+# gradients are the same bit for bit (``test_merit.py::
+# test_run_time_checks_off_gives_the_same_numbers_without_a_callback``); the tests of the
+# checks themselves turn them on (the ``with_run_time_checks`` fixture), and the README's
+# example runs in a process with them on, as users get it (``test_readme.py``).
+os.environ.setdefault("JMSE_JAX_RUN_TIME_CHECKS", "0")
+
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
@@ -66,6 +76,13 @@ def fig1():
     """The paper's Fig. 1 point: (aberrations, field, u, signal, noise)."""
     return (jj.Seidel(**FIG1_COEFFICIENTS), 0.95, 0.2, jj.MarkovSignal(1.0, 5.0),
             jj.WhiteNoise(1e-3))
+
+
+@pytest.fixture
+def with_run_time_checks(monkeypatch):
+    """``jmse``'s run-time checks on (as users get them; off elsewhere in the suite, above),
+    for the tests of the warnings traced calls give when their programs run."""
+    monkeypatch.setenv("JMSE_JAX_RUN_TIME_CHECKS", "1")
 
 
 @pytest.fixture

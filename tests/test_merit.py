@@ -1306,7 +1306,7 @@ def test_traced_design_check_warns_as_the_concrete_call(preset):
     assert all(str(w.message).endswith("give the values)") for w in traced)
 
 
-def test_traced_call_checks_its_design_when_it_runs():
+def test_traced_call_checks_its_design_when_it_runs(with_run_time_checks):
     """A jitted value, a jitted gradient and a vmap batch of ``jmse`` warn of a design beyond
     the checked strength when they run, once per kind and batch; a design inside gives
     none, nor do grids of one's own. The value is the concrete call's."""
@@ -1336,6 +1336,91 @@ def test_traced_call_checks_its_design_when_it_runs():
             jax.block_until_ready(fn(arg))
         assert _kinds(caught) == ["strength"], fn
         assert "of a design in a traced call is beyond" in str(caught[0].message)
+
+
+def test_run_time_checks_off_gives_the_same_numbers_without_a_callback(with_run_time_checks):
+    """Inside ``run_time_checks(False)`` a traced call's program has no host callback (so
+    JAX's persistent compilation cache can store it: the next test), gives no run-time
+    warning, and its value and gradient are the checked program's bit for bit, at a design
+    beyond the checked strength and at one inside. The checked program (on by default) has
+    the callback and warns."""
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+
+    def merit(w020):
+        return jj.jmse(jj.Seidel(w020=w020, w131=0.3), 0.5, 0.2, signal, noise, preset="fast")
+
+    strong = 60.0
+    # Two programs: the setting is read when a call is traced.
+    checked = jax.jit(lambda w: jax.value_and_grad(merit)(w))
+    unchecked = jax.jit(lambda w: jax.value_and_grad(merit)(w))
+    assert "callback" in checked.lower(strong).as_text()
+    with jj.run_time_checks(False):
+        assert "callback" not in unchecked.lower(strong).as_text()
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            off = [unchecked(w) for w in (1.0, strong)]
+    with pytest.warns(UserWarning, match="of a design in a traced call is beyond"):
+        on = [jax.block_until_ready(checked(w)) for w in (1.0, strong)]
+    for (value_on, grad_on), (value_off, grad_off) in zip(on, off, strict=True):
+        assert float(value_off) == float(value_on)
+        assert float(grad_off) == float(grad_on)
+
+
+def test_run_time_checks_off_lets_the_persistent_cache_store_the_program(tmp_path):
+    """In a fresh process with its own persistent compilation cache, the jitted merit with
+    the run-time checks on stores nothing (JAX keeps programs with host callbacks out), and
+    with ``run_time_checks(False)`` it is stored."""
+    import os
+    import subprocess
+    import sys
+
+    script = """
+import os, sys, jax
+jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_compilation_cache_dir", sys.argv[1])
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+import jmse_jax as jj
+def merit():  # a new function each time: JAX reuses a function's traced program
+    return lambda w: jj.jmse(jj.Seidel(w020=w, w131=0.3), 0.5, 0.2, jj.MarkovSignal(1.0, 5.0),
+                             jj.WhiteNoise(1e-3), preset="fast")
+def stored():
+    return sum(1 for name in os.listdir(sys.argv[1]) if name.startswith("jit__lambda"))
+jax.jit(merit()).lower(1.0).compile()
+print(stored())
+with jj.run_time_checks(False):
+    jax.jit(merit()).lower(1.0).compile()
+print(stored())
+"""
+    env = dict(os.environ, JMSE_JAX_RUN_TIME_CHECKS="1")
+    out = subprocess.run([sys.executable, "-c", script, str(tmp_path)], env=env, check=True,
+                         capture_output=True, text=True, timeout=600).stdout.split()
+    assert out == ["0", "1"]
+
+
+def test_run_time_checks_setting_and_its_errors(monkeypatch):
+    """``run_time_checks`` overrides ``JMSE_JAX_RUN_TIME_CHECKS``, which gives the process's
+    default (unset: on); a bad value of either raises, naming it."""
+    from jmse_jax._merit import _run_time_checks_on
+
+    monkeypatch.delenv(jj.RUN_TIME_CHECKS_VARIABLE, raising=False)
+    assert _run_time_checks_on()
+    for value, expected in (("0", False), ("off", False), (" False ", False), ("1", True),
+                            ("on", True)):
+        monkeypatch.setenv(jj.RUN_TIME_CHECKS_VARIABLE, value)
+        assert _run_time_checks_on() is expected
+        with jj.run_time_checks(not expected):
+            assert _run_time_checks_on() is (not expected)
+            with jj.run_time_checks(expected):
+                assert _run_time_checks_on() is expected
+            assert _run_time_checks_on() is (not expected)
+        assert _run_time_checks_on() is expected
+    monkeypatch.setenv(jj.RUN_TIME_CHECKS_VARIABLE, "maybe")
+    with pytest.raises(ValueError, match=r"JMSE_JAX_RUN_TIME_CHECKS must be 1 or 0.*'maybe'"):
+        jax.jit(lambda w: jj.jmse(jj.Seidel(w020=w), 0.5, 0.2, jj.MarkovSignal(1.0, 5.0),
+                                  jj.WhiteNoise(1e-3), preset="fast")).lower(1.0)
+    with pytest.raises(ValueError, match=r"enabled must be True or False, got 'no'"):
+        with jj.run_time_checks("no"):
+            pass
 
 
 def test_traced_band_past_u_max_is_computed(fig1):

@@ -54,12 +54,14 @@ def test_optimised_code_users_get_gives_the_suite_numbers():
     optimisation, as users run the library (a process without the flag), the value,
     gradient, baseline and OTF agree with the suite's to rounding: the flag changes how the
     arithmetic is scheduled, not what it computes. (Where the caller runs the suite at
-    XLA's default level, conftest, the two processes compile alike.)"""
+    XLA's default level, conftest, the two processes compile alike.) The users' process has
+    ``jmse``'s run-time checks on, as users get them (the suite has them off: conftest)."""
     flags = [f for f in os.environ.get("XLA_FLAGS", "").split()
              if not f.startswith("--xla_backend_optimization_level")]
     script = ("import json, jax\njax.config.update('jax_enable_x64', True)\n"
               "import test_readme\nprint(json.dumps(test_readme._fig1_numbers()))\n")
-    env = dict(os.environ, XLA_FLAGS=" ".join(flags),
+    # As users run it: their XLA level, and jmse's run-time checks on (off in the suite).
+    env = dict(os.environ, XLA_FLAGS=" ".join(flags), JMSE_JAX_RUN_TIME_CHECKS="1",
                PYTHONPATH=os.pathsep.join([str(pathlib.Path(__file__).parent),
                                            os.environ.get("PYTHONPATH", "")]))
     out = subprocess.run([sys.executable, "-c", script], env=env, check=True,

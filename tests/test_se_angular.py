@@ -389,7 +389,7 @@ def test_gradient_takes_the_count_by_itself_with_concrete_spectra(small_radial_t
         (None, None), None, True)
 
 
-def test_traced_spectra_warn_at_run_time(small_radial_table):
+def test_traced_spectra_warn_at_run_time(small_radial_table, with_run_time_checks):
     """With the noise traced (an argument of the caller's ``jit``, differentiated, here
     under ``vmap``) the counts cannot be chosen: each gradient checks the peak ratio when
     it runs and warns beyond ``CHECKED_SNR``, naming the counts; inside it, silence. The
@@ -423,6 +423,12 @@ def test_traced_spectra_warn_at_run_time(small_radial_table):
         traced = jax.block_until_ready(
             values(STEEP_C, jnp.array([100 * STEEP_NOISE, STEEP_NOISE])))
     assert float(traced[1]) == pytest.approx(own_value, rel=1e-13)
+    # Without the run-time checks (jj.run_time_checks(False)): silence, the same values.
+    with jj.run_time_checks(False), warnings.catch_warnings():
+        warnings.simplefilter("error")
+        quiet = jax.jit(jax.vmap(lambda c, n: _steep(c, n), in_axes=(None, 0)))(
+            STEEP_C, jnp.array([100 * STEEP_NOISE, STEEP_NOISE]))
+    assert np.array_equal(np.asarray(quiet), np.asarray(traced))
     # Beyond CHECKED_SNR_PEAKS no count was checked, and the warning says so.
     with pytest.warns(UserWarning, match=r"peak S_x / S_n of 1\.5e\+09.*pass otf_radial="
                                          rf"{STEEP_RADIAL} .*beyond 2e\+08 "

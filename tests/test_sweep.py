@@ -474,7 +474,7 @@ def _sweep_warnings(monkeypatch, *args, **options):
     return [(str(w.message), w.filename) for w in caught]
 
 
-def test_sweep_jmse_warns_once_not_again_at_run_time():
+def test_sweep_jmse_warns_once_not_again_at_run_time(with_run_time_checks):
     """``sweep_jmse`` gives its designs' warnings before the sweep, and its program, traced
     with them given (``_checked_already``), carries no run-time check of its own
     (``jmse``'s ``_design_check``): one warning, not two."""
