@@ -3006,7 +3006,8 @@ def _checked_already():
 #: The environment variable that sets the process's default for ``run_time_checks``
 #: (``1`` or ``0``; unset: on).
 RUN_TIME_CHECKS_VARIABLE = "JMSE_JAX_RUN_TIME_CHECKS"
-_RUN_TIME_CHECKS = contextvars.ContextVar("jmse_jax_run_time_checks", default=None)
+_RUN_TIME_CHECKS: contextvars.ContextVar[bool | None] = contextvars.ContextVar(
+    "jmse_jax_run_time_checks", default=None)
 _SWITCH_VALUES = {"1": True, "true": True, "on": True, "0": False, "false": False, "off": False}
 
 
