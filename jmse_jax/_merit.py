@@ -2038,7 +2038,9 @@ def jmse(
     when the program runs, in words that name the bound rather than the design's values,
     so that Python's filters show each once: the program computes the strength, slope,
     cancellation and ratio as a concrete call does and calls the host only for a design
-    beyond them (once per ``vmap`` batch).
+    beyond them (once per ``vmap`` batch). JAX's persistent compilation cache keeps no
+    program that calls the host: trace inside ``run_time_checks(False)`` to leave the
+    checks out (the same numbers, no run-time warnings).
     Discrete options are static (Python values). Bad concrete input raises ``ValueError``;
     under ``jit``/``vmap`` non-finite or out-of-range inputs (``field``, ``u <= 0``, the
     spectra's parameters) give ``+inf`` (never NaN) with zero gradient. A traced ``u`` above

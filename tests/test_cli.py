@@ -687,6 +687,21 @@ def _eval_in_subprocess(tmp_path, *extra):
     return json.loads(out_json.read_text())
 
 
+def test_timed_programs_are_kept_in_the_compile_cache(tmp_path):
+    """``jmse-jax bench --builtin`` (and ``reproduce``'s Fig. 1 timings: the same
+    ``_warm_times``) traces its jitted programs without ``jmse``'s run-time checks, whose
+    host callback keeps a program out of JAX's cache: with the checks on, as users run the
+    command, the run stores all four timed programs (the baseline's value and
+    ``value_and_grad``, and ``jmse``'s), not the baseline's two alone."""
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+    env.update(JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0", JMSE_JAX_RUN_TIME_CHECKS="1",
+               XDG_CACHE_HOME=str(tmp_path / "cache"))
+    subprocess.run([sys.executable, "-m", "jmse_jax.cli", "bench", "--builtin", "--repeats",
+                    "1"], env=env, check=True, capture_output=True, timeout=600)
+    folder = tmp_path / "cache" / "jmse_jax" / "xla"
+    assert sum(p.name.startswith("jit__lambda-") for p in folder.iterdir()) == 4
+
+
 @pytest.mark.slow
 def test_compile_cache_is_kept_between_runs_and_can_be_turned_off(tmp_path):
     off = _eval_in_subprocess(tmp_path, "--no-compile-cache")
