@@ -17,6 +17,11 @@ Problems are the test bank's (``tests/problems.py``), or a design of one's own w
     taskset -c 1 python benchmarks/ab_compare.py /tmp/old . --presets default \
         --design '{"w020": -6, "field": 0, "u": 0.5, "noise": 1e-2}'
 
+With ``--traced`` the field, ``u`` and the spectra are arguments of the jitted calls, as in
+an optimiser's loop and in ``accuracy_speed.py``, rather than constants closed over (which
+XLA folds); only the coefficients are differentiated either way. ``jmse``'s run-time checks
+are on in each version that has them unless ``JMSE_JAX_RUN_TIME_CHECKS=0`` is set.
+
 Values are printed to 16 digits next to the times, so a change that should only round can be
 checked at the same time.
 """
@@ -58,6 +63,9 @@ def _parse_args(argv=None):
                         help='jmse keyword overrides as JSON, e.g. \'{"nodes": [24, 12]}\'')
     parser.add_argument("--dtype", default="float64", choices=("float64", "float32"),
                         help="dtype of the problem's numbers, hence of the computation")
+    parser.add_argument("--traced", action="store_true",
+                        help="pass field, u and the spectra as arguments of the jitted calls "
+                             "instead of closing over them")
     parser.add_argument("--design", default=None,
                         help="JSON: Seidel coefficients (w020, w040, w131, w222, w220, w311, "
                              "w111) and field, u, noise, replacing the problem's")
@@ -119,32 +127,35 @@ def main(argv=None):
     calls = {}
     for i, module in enumerate(modules):
         operands = [_rebuild(x, module, args.dtype) for x in problem.arguments()]
+        # The arguments of each jitted call: the coefficients, and with --traced the rest.
+        call_args = (operands[0], tuple(operands[1:])) if args.traced else (operands[0],)
         for preset in presets:
             for mode in modes:
-                def merit(w, operands=operands, preset=preset, module=module):
-                    return module.jmse(w, *operands[1:], preset=preset, **options)
+                def merit(w, rest=tuple(operands[1:]), preset=preset, module=module):
+                    return module.jmse(w, *rest, preset=preset, **options)
 
                 if mode == "value":
                     fn = jax.jit(merit)
                 elif mode == "vag":
                     fn = jax.jit(jax.value_and_grad(merit))
                 elif mode == "jvp":  # forward mode, all coefficients' tangents 1
-                    fn = jax.jit(lambda w, merit=merit: jax.jvp(
-                        merit, (w,), (jax.tree_util.tree_map(jnp.ones_like, w),)))
+                    fn = jax.jit(lambda w, *rest, merit=merit: jax.jvp(
+                        lambda w: merit(w, *rest), (w,),
+                        (jax.tree_util.tree_map(jnp.ones_like, w),)))
                 else:
                     raise SystemExit(f"unknown mode {mode!r}: value, vag or jvp")
-                out = jax.block_until_ready(fn(operands[0]))
+                out = jax.block_until_ready(fn(*call_args))
                 value = float(out if mode == "value" else out[0])
-                calls[i, preset, mode] = (fn, operands[0], value)
+                calls[i, preset, mode] = (fn, call_args, value)
     best = dict.fromkeys(calls, float("inf"))
     for _ in range(args.rounds):
-        for key, (fn, w, _) in calls.items():
+        for key, (fn, call_args, _) in calls.items():
             for _ in range(args.calls):
                 start = time.perf_counter()
-                jax.block_until_ready(fn(w))
+                jax.block_until_ready(fn(*call_args))
                 best[key] = min(best[key], time.perf_counter() - start)
-    print(f"{problem.name} ({args.dtype}): fastest of {args.rounds} x {args.calls} calls "
-          "per version")
+    print(f"{problem.name} ({args.dtype}{', all traced' if args.traced else ''}): fastest of "
+          f"{args.rounds} x {args.calls} calls per version")
     for preset in presets:
         for mode in modes:
             cells = []
