@@ -2997,12 +2997,17 @@ _CHECKED_ALREADY = contextvars.ContextVar("jmse_jax_checked_already", default=Fa
 
 
 @contextlib.contextmanager
-def _checked_already():
-    token = _CHECKED_ALREADY.set(True)
+def _setting(variable: contextvars.ContextVar, value):
+    """``variable`` set to ``value`` inside the block."""
+    token = variable.set(value)
     try:
         yield
     finally:
-        _CHECKED_ALREADY.reset(token)
+        variable.reset(token)
+
+
+def _checked_already():
+    return _setting(_CHECKED_ALREADY, True)
 
 
 #: The environment variable that sets the process's default for ``run_time_checks``
@@ -3022,7 +3027,7 @@ def run_time_checks(enabled: bool = True):
     slope, cancelling terms, peak ``S_x / S_n``; ``"high"``'s low-noise counts), through a
     host callback. JAX does not store a program with a host callback in its persistent
     compilation cache (``jax_compilation_cache_dir``), so such a program compiles anew in
-    every process (the default's ``value_and_grad``: about 20-40 s on 2 cores). Inside
+    every process (the default's ``value_and_grad``: about 30-60 s on 2 cores). Inside
     ``run_time_checks(False)`` the program has no callback and is cached; its values and
     gradients are the same bit for bit, but a design beyond the checked range is not
     reported: call ``aberration_strength`` or ``jmse`` on concrete designs to see it.
@@ -3047,11 +3052,8 @@ def run_time_checks(enabled: bool = True):
     """
     if not isinstance(enabled, (bool, np.bool_)):
         raise ValueError(f"run_time_checks: enabled must be True or False, got {enabled!r}")
-    token = _RUN_TIME_CHECKS.set(bool(enabled))
-    try:
+    with _setting(_RUN_TIME_CHECKS, bool(enabled)):
         yield
-    finally:
-        _RUN_TIME_CHECKS.reset(token)
 
 
 def _run_time_checks_on() -> bool:
@@ -3063,10 +3065,11 @@ def _run_time_checks_on() -> bool:
     value = os.environ.get(RUN_TIME_CHECKS_VARIABLE)
     if value is None:
         return True
-    if value.strip().lower() not in _SWITCH_VALUES:
+    enabled = _SWITCH_VALUES.get(value.strip().lower())
+    if enabled is None:
         raise ValueError(f"the environment variable {RUN_TIME_CHECKS_VARIABLE} must be 1 or 0 "
                          f"(or true/false, on/off), got {value!r}")
-    return _SWITCH_VALUES[value.strip().lower()]
+    return enabled
 
 
 def _warn_design(static, inputs, choice, stacklevel):

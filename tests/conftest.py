@@ -82,7 +82,7 @@ def fig1():
 def with_run_time_checks(monkeypatch):
     """``jmse``'s run-time checks on (as users get them; off elsewhere in the suite, above),
     for the tests of the warnings traced calls give when their programs run."""
-    monkeypatch.setenv("JMSE_JAX_RUN_TIME_CHECKS", "1")
+    monkeypatch.setenv(jj.RUN_TIME_CHECKS_VARIABLE, "1")
 
 
 @pytest.fixture

@@ -1306,17 +1306,21 @@ def test_traced_design_check_warns_as_the_concrete_call(preset):
     assert all(str(w.message).endswith("give the values)") for w in traced)
 
 
+#: Defocus past CHECKED_STRENGTH in ``_defocus_merit`` (strength 34).
+_STRONG_DEFOCUS = 60.0
+
+
+def _defocus_merit(w020, **options):
+    """``fast``'s JMSE of ``w020`` waves of defocus with a little coma (field 0.5, u = 0.2)."""
+    return jj.jmse(jj.Seidel(w020=w020, w131=0.3), 0.5, 0.2, jj.MarkovSignal(1.0, 5.0),
+                   jj.WhiteNoise(1e-3), **{"preset": "fast", **options})
+
+
 def test_traced_call_checks_its_design_when_it_runs(with_run_time_checks):
     """A jitted value, a jitted gradient and a vmap batch of ``jmse`` warn of a design beyond
     the checked strength when they run, once per kind and batch; a design inside gives
     none, nor do grids of one's own. The value is the concrete call's."""
-    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
-
-    def merit(w020, **options):
-        return jj.jmse(jj.Seidel(w020=w020, w131=0.3), 0.5, 0.2, signal, noise,
-                       **{"preset": "fast", **options})
-
-    strong = 60.0
+    merit, strong = _defocus_merit, _STRONG_DEFOCUS
     assert float(jj.aberration_strength(jj.Seidel(w020=strong, w131=0.3), 0.5, 0.2)) > (
         jj.CHECKED_STRENGTH)
     value = jax.jit(merit)
@@ -1344,12 +1348,7 @@ def test_run_time_checks_off_gives_the_same_numbers_without_a_callback(with_run_
     warning, and its value and gradient are the checked program's bit for bit, at a design
     beyond the checked strength and at one inside. The checked program (on by default) has
     the callback and warns."""
-    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
-
-    def merit(w020):
-        return jj.jmse(jj.Seidel(w020=w020, w131=0.3), 0.5, 0.2, signal, noise, preset="fast")
-
-    strong = 60.0
+    merit, strong = _defocus_merit, _STRONG_DEFOCUS
     # Two programs: the setting is read when a call is traced.
     checked = jax.jit(lambda w: jax.value_and_grad(merit)(w))
     unchecked = jax.jit(lambda w: jax.value_and_grad(merit)(w))
