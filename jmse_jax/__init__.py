@@ -50,6 +50,7 @@ from ._merit import (
     run_time_checks as run_time_checks,
     se_angular_for as se_angular_for,
 )
+from ._numerics import AccuracyWarning as AccuracyWarning
 from ._optimise import (
     OptimisationResult as OptimisationResult,
     lens_merit as lens_merit,

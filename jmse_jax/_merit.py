@@ -23,6 +23,7 @@ from jax.flatten_util import ravel_pytree
 from ._aberrations import AbstractAberrations, Seidel, Zernike
 from ._numerics import (
     EXACT,
+    AccuracyWarning,
     all_finite,
     batch_skipping_cond,
     check_choice,
@@ -98,7 +99,7 @@ U_MAX = 1.5
 
 #: The largest ``aberration_strength`` at which the default's tiers (and ``"high"``) were
 #: checked (docs/accuracy.md, "The adaptive default"). A concrete design beyond it gets a
-#: ``UserWarning`` from ``jmse``. ``"fast"`` has no bound of its own: it is percent-level off
+#: ``AccuracyWarning`` from ``jmse``. ``"fast"`` has no bound of its own: it is percent-level off
 #: on some designs well inside this (docs/accuracy.md, "The `fast` preset").
 CHECKED_STRENGTH = 25.0
 #: The same for rotationally symmetric designs, which take the one-ray plans (docs/accuracy.md).
@@ -111,13 +112,13 @@ CHECKED_STRENGTH_ONE_RAY = 45.0
 #: overlap rule): on designs of slope up to 67 at u 0.1-0.3 the worst error was 7.2e-5
 #: (``benchmarks/small_u_single_terms.py`` and STEEP_SLOPE's note); beyond, single terms
 #: were far off (74 waves of coma at u = 0.1, slope 173, 1.6e-1; 43 waves of defocus at
-#: u = 0.2, slope 87, 7e-3). A concrete design beyond it gets a ``UserWarning`` from ``jmse``.
+#: u = 0.2, slope 87, 7e-3). A concrete design beyond it gets an ``AccuracyWarning`` from ``jmse``.
 CHECKED_SLOPE = 65.0
 #: Terms that cancel each other's slope: a design off the axis whose ``cancellation`` (the
 #: ``aberration_strength`` of each of its terms alone, summed, over the design's own) is at
 #: least this, at a strength of at least ``CANCELLING_STRENGTH``, takes the default's
 #: balanced tier (``BALANCED_GRID``; ``"high"`` its ``HIGH_BALANCED_GRID``), and with the
-#: preset that has none (``"fast"``) gets a ``UserWarning`` from a concrete ``jmse`` call
+#: preset that has none (``"fast"``) gets an ``AccuracyWarning`` from a concrete ``jmse`` call
 #: (and from ``eval`` and ``sweep``). The tiers were calibrated on random designs, whose
 #: terms seldom cancel (median 1.3); defocus set against spherical aberration, as a
 #: designer balances them (``W = c (rho^2 + r rho^4)``, cancellation 2-7 for r in
@@ -133,7 +134,7 @@ BALANCED_CANCELLATION = 2.5
 #: The strength from which ``BALANCED_CANCELLATION`` applies.
 CANCELLING_STRENGTH = 2.5
 #: The largest ``cancellation`` at which the balanced tier was checked: a design beyond it
-#: (off the axis, of strength at least ``CANCELLING_STRENGTH``) gets a ``UserWarning`` from
+#: (off the axis, of strength at least ``CANCELLING_STRENGTH``) gets an ``AccuracyWarning`` from
 #: a concrete default or ``"high"`` ``jmse`` call (and from ``eval`` and ``sweep``). Defocus against
 #: spherical aberration reaches 7.0 at ``r = -2/3``, the most for those two terms (3000
 #: random designs of defocus, spherical aberration, coma and astigmatism within +-10 waves
@@ -150,7 +151,7 @@ CHECKED_CANCELLATION = 7.0
 #: found the default's steep tier 4.7e-4 off in the value and 1e-1 in the gradient under
 #: power-law spectra (under Markov spectra 1.3e-5 and 6.3e-4; near the axis its strong
 #: tiers' peaks hold it within 1e-6), with ``peaks=True`` too, since that tier has them
-#: already. A concrete call that takes a polar grid of a preset gets a ``UserWarning``.
+#: already. A concrete call that takes a polar grid of a preset gets an ``AccuracyWarning``.
 #: ``"high"`` is held to ``CHECKED_SNR_PEAKS`` instead, and so are rotationally symmetric
 #: designs: their one-ray plans integrate those peaks in closed form (single terms checked
 #: to a peak ratio of 1.6e16; defocus balanced against spherical aberration within 7e-5 up
@@ -2027,7 +2028,7 @@ def jmse(
     at (``CHECKED_STRENGTH``, 25; 45 for rotationally symmetric designs), or whose wavefront
     slope ``max |grad W|`` does (``CHECKED_SLOPE``, 65 waves per pupil radius: at small
     ``u`` a design of moderate strength can hold many waves), gets a
-    ``UserWarning`` unless grid options are given, and so does a peak ``max S_x / S_n``
+    ``AccuracyWarning`` unless grid options are given, and so does a peak ``max S_x / S_n``
     above ``CHECKED_SNR`` (2e6; ``CHECKED_SNR_PEAKS``, 2e8, with ``peaks`` outside the
     default's tiers, as in ``"high"``, or for a rotationally symmetric design, whose one-ray
     plan integrates them in closed form): narrow features of ``S_e`` then outgrow the grids
@@ -2343,7 +2344,7 @@ def _warn_traced_designs(balanced, snr_peaks, snr, stats):
                 f"more than {CHECKED_CANCELLATION if balanced else BALANCED_CANCELLATION:g}",
                 balanced))):
         if beyond.any():
-            warnings.warn(message + _TRACED_SUFFIX, UserWarning, stacklevel=2)
+            warnings.warn(message + _TRACED_SUFFIX, AccuracyWarning, stacklevel=2)
     if snr:
         peaks = symmetric | snr_peaks
         beyond = peak > np.where(peaks, CHECKED_SNR_PEAKS, CHECKED_SNR)
@@ -2472,7 +2473,7 @@ def _warn_traced_snr(own, gradient, snr):
         f"it ({tables}), and preset='high''s own hold its {what} only to "
         f"{CHECKED_SNR:.0e}; pass {give} ({helpers} of (u, signal, noise)){also} to jmse"
         f"{beyond}",
-        UserWarning, stacklevel=2)
+        AccuracyWarning, stacklevel=2)
 
 
 def _prepare(arguments, options):
@@ -2854,7 +2855,7 @@ def _warn_snr_of_traced_design(static, u, signal, noise, stacklevel):
 
 def _warn_beyond_checked_snr(u, signal, noise, stacklevel, peaks=False, gradient=False,
                              se_angular=None, otf_radial=None, traced_design=False):
-    """A ``UserWarning`` when the concrete spectra's peak ``S_x / S_n`` exceeds
+    """An ``AccuracyWarning`` when the concrete spectra's peak ``S_x / S_n`` exceeds
     ``CHECKED_SNR`` (for calls with a preset's grids), or ``CHECKED_SNR_PEAKS`` with the
     closed-form peaks (``peaks``: ``_snr_peaks`` of the options, or a one-ray plan).
     ``gradient`` (``optimise``, which follows the gradient): with the peaks, a warning
@@ -2890,7 +2891,7 @@ def _warn_snr(snr, stacklevel, peaks=False, gradient=False, se_angular=None, otf
             f"benchmarks/default_climb.py --preset high --gradient --noise). Give {give} "
             f"(jmse_options; jmse_jax.se_angular_for, otf_radial_for), which optimise takes "
             f"by itself when none of se_angular, otf_radial and their grad_ twins is given",
-            UserWarning, stacklevel=stacklevel)
+            AccuracyWarning, stacklevel=stacklevel)
         return
     if peaks:
         if snr > CHECKED_SNR_PEAKS:
@@ -2903,7 +2904,7 @@ def _warn_snr(snr, stacklevel, peaks=False, gradient=False, se_angular=None, otf
                 f"the JMSE and its gradient may be off by more than 1e-4 (1e-2 measured at "
                 f"1.6e10 on defocus balanced against spherical aberration). Give finer grids "
                 f"and compare two of them" + suffix,
-                UserWarning, stacklevel=stacklevel)
+                AccuracyWarning, stacklevel=stacklevel)
         return
     if snr > CHECKED_SNR:
         warnings.warn(
@@ -2921,7 +2922,7 @@ def _warn_snr(snr, stacklevel, peaks=False, gradient=False, se_angular=None, otf
                f"a rotationally symmetric one (on the axis), which takes the one-ray plan, "
                f"was checked to {CHECKED_SNR_PEAKS:.0e}"
                if traced_design and snr <= CHECKED_SNR_PEAKS else "") + suffix,
-            UserWarning, stacklevel=stacklevel)
+            AccuracyWarning, stacklevel=stacklevel)
 
 
 def _strength_message(which: str) -> str:
@@ -3073,7 +3074,7 @@ def _run_time_checks_on() -> bool:
 
 
 def _warn_design(static, inputs, choice, stacklevel):
-    """The ``UserWarning`` of a concrete design (``inputs``, as ``jmse``'s) beyond what the
+    """The ``AccuracyWarning`` of a concrete design (``inputs``, as ``jmse``'s) beyond what the
     presets were checked at: its strength (``CHECKED_STRENGTH``), else its wavefront slope,
     else its cancelling terms, and the peak ``S_x / S_n`` of the spectra. ``choice``: the
     design's ``_concrete_choice`` as Python scalars; ``stacklevel``: ``warnings.warn``'s,
@@ -3083,12 +3084,12 @@ def _warn_design(static, inputs, choice, stacklevel):
     strong, steep, cancelling, slope = _beyond_checked(
         strength, float(inputs[2]), symmetric, cancellation, balanced=balanced)
     if strong:
-        warnings.warn(_strength_message(f"{strength:.3g}"), UserWarning, stacklevel=stacklevel)
+        warnings.warn(_strength_message(f"{strength:.3g}"), AccuracyWarning, stacklevel=stacklevel)
     elif steep:
-        warnings.warn(_slope_message(f"{float(slope):.3g}"), UserWarning,
+        warnings.warn(_slope_message(f"{float(slope):.3g}"), AccuracyWarning,
                       stacklevel=stacklevel)
     elif cancelling:
-        warnings.warn(_cancellation_message(f"{cancellation:.3g}", balanced), UserWarning,
+        warnings.warn(_cancellation_message(f"{cancellation:.3g}", balanced), AccuracyWarning,
                       stacklevel=stacklevel)
     # The one-ray plans integrate the peaks in closed form, as peaks=True does.
     _warn_beyond_checked_snr(*inputs[2:], stacklevel=stacklevel + 1, peaks=bool(symmetric)
@@ -3154,7 +3155,7 @@ def _concrete_merit(static, inputs, warn=False):
     first, and only the grids it needs are compiled (each once per process) and run.
     Returns ``(value, plan index, one-ray plan taken, path)`` (``_eager_tier_choice``; the
     index is the tier by strength when a one-ray plan is taken, since it picks that plan);
-    ``warn``: a ``UserWarning`` when the design is stronger than the presets were checked at
+    ``warn``: an ``AccuracyWarning`` when the design is stronger than the presets were checked at
     (``CHECKED_STRENGTH``)."""
     dtype = static.value[3]
     plans = _base_plans(static, inputs[0])
@@ -3190,7 +3191,7 @@ def _warn_coarse_band(u, B):
             f"rectangle rule is then off by tens of percent or more, erratically in B "
             f"(measured -99.8 % to +232 % at the Fig. 1 point for u * B < 5). Use "
             f"B >= {math.ceil(BASELINE_MIN_LAGS / float(u))}",
-            UserWarning, stacklevel=3)
+            AccuracyWarning, stacklevel=3)
 
 
 def baseline_jmse(aberrations, field, u, signal, noise, B: int = 64):

@@ -18,6 +18,7 @@ import numpy as np
 
 __all__ = [
     "EXACT",
+    "AccuracyWarning",
     "SEQUENTIAL_BRANCH_BACKENDS",
     "abs2",
     "all_finite",
@@ -53,6 +54,18 @@ __all__ = [
 #: errors of about 5e-4 into a float32 JMSE (measured on an H100); full precision keeps
 #: float32 within about 1e-6 of float64. CPUs compute every product in full precision.
 EXACT = jax.lax.Precision.HIGHEST
+
+
+class AccuracyWarning(UserWarning):
+    """The category of every warning ``jmse_jax`` gives: a result that may be less accurate
+    than the call's preset or grids were checked to give (a design stronger or steeper than
+    the checked range, terms that cancel beyond it, a peak ``S_x / S_n`` beyond the checked
+    noise, too few ``otf`` nodes, a square grid too coarse for ``baseline_jmse``'s band).
+    A ``UserWarning``, so Python shows it once per place by default; select it by category,
+    e.g. ``warnings.simplefilter("error", jmse_jax.AccuracyWarning)`` to stop on one, or
+    ``"ignore"`` in a sweep that knows its designs lie outside the checked range. The
+    command line prints these as ``jmse-jax: warning: ...`` and any other warning in
+    Python's own form."""
 
 
 # --------------------------------------------------------------------------------------

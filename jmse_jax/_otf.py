@@ -42,6 +42,7 @@ from ._aberrations import AbstractAberrations, Seidel
 from ._chords import chord_integral, even_chord_integral
 from ._numerics import (
     EXACT,
+    AccuracyWarning,
     all_finite,
     barycentric_matrix,
     check_choice,
@@ -589,7 +590,7 @@ def _phase_spread(aberrations, field, s_max):
 
 
 def _warn_if_coarse(aberrations, nu_x, nu_y, field, nodes):
-    """A ``UserWarning`` when the overlap ``nodes`` look too few for the design at the
+    """An ``AccuracyWarning`` when the overlap ``nodes`` look too few for the design at the
     frequencies asked for (concrete input only)."""
     if not is_concrete((aberrations, nu_x, nu_y, field)):
         return
@@ -606,7 +607,7 @@ def _warn_if_coarse(aberrations, nu_x, nu_y, field, nodes):
             f"otf: nodes={tuple(nodes)} may be too few for this design at |nu| up to "
             f"{s_max:.3g}: the phase difference across the overlap spreads over "
             f"{spread:.3g} waves; about nodes=({need}, {need}) holds 1e-6 (compare two "
-            f"counts)", UserWarning, stacklevel=3)
+            f"counts)", AccuracyWarning, stacklevel=3)
 
 
 def otf(
@@ -632,7 +633,7 @@ def otf(
     nodes : (int, int)
         ``(n_phi, n_t)`` Gauss nodes across/along each half of the overlap lens
         (``"overlap"``). About ``n >= pi * |2 s grad W|_max + 12`` per axis reaches 1e-10.
-        When the inputs are concrete, a ``UserWarning`` says when they look too few for
+        When the inputs are concrete, an ``AccuracyWarning`` says when they look too few for
         1e-6 (``_phase_spread``); with frequencies up to the cutoff the default (32, 32)
         is quiet up to 8 waves of defocus or 6 of coma at full field (cautious: they hold
         1e-6 at (32, 32) up to 10 and 8 waves). For Seidel wavefronts in float64, ``n_t >=

@@ -53,7 +53,7 @@ from ._merit import (
     jmse,
     jmse_options,
 )
-from ._numerics import all_finite, check_count, is_concrete
+from ._numerics import AccuracyWarning, all_finite, check_count, is_concrete
 
 __all__ = ["SweepResult", "SweepStatus", "hypercube", "sweep", "sweep_jmse"]
 
@@ -868,7 +868,7 @@ def warn_like_jmse(aberrations, field, u, signal, noise, options, stacklevel: in
         if beyond.any():
             warnings.warn(beyond_message(message, float(values[beyond].max()),
                                          int(beyond.sum()), n),
-                          UserWarning, stacklevel=stacklevel)
+                          AccuracyWarning, stacklevel=stacklevel)
     # The one-ray plans integrate the peaks in closed form, as peaks=True does.
     off_axis = ~symmetric.astype(bool)
     u_max = jnp.asarray(np.max(u[off_axis] if off_axis.any() else u), u.dtype)

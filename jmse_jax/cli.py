@@ -21,7 +21,7 @@ import warnings
 from typing import Any
 
 from ._merit import U_MAX
-from ._numerics import check_range
+from ._numerics import AccuracyWarning, check_range
 from ._reproduce import FIG1, FIG1_FIELD, FIG1_U
 from ._sweep import DEFAULT_ACCELERATOR_BATCH, _checked_already
 
@@ -226,9 +226,30 @@ def warn_like_jmse(aberrations, field, u, signal, noise, preset: str) -> list:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         library_warnings(aberrations, field, u, signal, noise, {"preset": preset})
-    texts = [" ".join(str(w.message).split()) for w in caught]
-    for text in texts:
-        print(f"jmse-jax: warning: {text}", file=sys.stderr, flush=True)
+    return report_warnings(caught)
+
+
+def report_warnings(caught, printed=()) -> list:
+    """Report warnings recorded by ``warnings.catch_warnings(record=True)``: the library's
+    own (``jmse_jax.AccuracyWarning``) on stderr as ``jmse-jax: warning: <text>``, one line
+    each, each text once and none of those in ``printed``; any other warning (JAX's, NumPy's,
+    the optimiser's) is given back to Python's warning machinery as it was raised, so it
+    shows in Python's own form, naming its category and source, and obeys the filters in
+    force (a ``DeprecationWarning`` from a library stays hidden by default). Each distinct
+    warning once. Returns the texts printed."""
+    shown = set(printed)
+    texts, others = [], set()
+    for w in caught:
+        if issubclass(w.category, AccuracyWarning):
+            text = " ".join(str(w.message).split())
+            if text not in shown:
+                shown.add(text)
+                texts.append(text)
+                print(f"jmse-jax: warning: {text}", file=sys.stderr, flush=True)
+        elif (key := (w.category, str(w.message), w.filename, w.lineno)) not in others:
+            others.add(key)
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno,
+                                   source=w.source)
     return texts
 
 
@@ -373,10 +394,7 @@ def _cmd_eval(args) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = evaluate(settings)
-    for w in caught:
-        text = " ".join(str(w.message).split())
-        if text not in printed:
-            print(f"jmse-jax: warning: {text}", file=sys.stderr, flush=True)
+    report_warnings(caught, printed)
     inp = result["inputs"]
     print(f"JMSE (Wiener-restoration MSE), preset {inp['preset']}: field {inp['field']:g}, "
           f"u = {inp['u']:g} (Nyquist/cutoff), signal {inp['signal']}, "
@@ -443,8 +461,7 @@ def _cmd_optimise(args) -> int:
         result = jj.optimise(start, tuple(args.variables), merit=args.merit, u=args.u,
                              signal=signal, noise=noise, f_number=jl.PAPER_SINGLET["f_number"],
                              max_steps=args.max_steps, jmse_options={"preset": args.preset})
-    for text in dict.fromkeys(" ".join(str(w.message).split()) for w in caught):
-        print(f"jmse-jax: warning: {text}", file=sys.stderr, flush=True)
+    report_warnings(caught)
     print(result.summary())
     # The JMSE figures above are jmse's at the start's and the result's Seidel waves: the
     # warnings jmse gives such designs (e.g. a large --image-shift) are given here too.
@@ -740,6 +757,20 @@ def _add_spectra(parser, defaults: bool):
                         help="white noise power spectral density S_n (default 1e-3)")
 
 
+def _version() -> str:
+    """``jmse-jax --version``: the package's version and what it computes with (what a
+    report or a citation of a result should name)."""
+    import platform
+
+    import jax
+    import jaxlib
+
+    from . import __version__
+
+    return (f"jmse-jax {__version__} (jax {jax.__version__}, jaxlib {jaxlib.__version__}, "
+            f"Python {platform.python_version()})")
+
+
 def build_parser() -> argparse.ArgumentParser:
     fmt = _HelpFormatter
     parser = _Parser(
@@ -747,6 +778,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="JMSE (Wiener-restoration MSE) merit for computational-imaging design. "
         + UNITS + " Lens quantities in mm.",
     )
+    parser.add_argument("--version", action="version", version=_version(),
+                        help="print the package's version, and JAX's, and exit")
     parser.add_argument("--no-compile-cache", action="store_true",
                         help="do not keep compiled programs between runs (by default they are "
                         "kept in $XDG_CACHE_HOME/jmse_jax/xla, or ~/.cache/jmse_jax/xla, unless "

@@ -32,6 +32,20 @@ def run_cli(capsys, *argv):
     return status, out, err
 
 
+def test_version_names_the_installed_package_and_jax(capsys):
+    """``--version``: the installed distribution's version (its metadata, the oracle) and
+    JAX's, then exit 0 without a command."""
+    import importlib.metadata
+    import platform
+
+    status, out, _ = run_cli(capsys, "--version")
+    assert status == 0
+    assert out.strip() == (
+        f"jmse-jax {importlib.metadata.version('jmse_jax')} "
+        f"(jax {importlib.metadata.version('jax')}, jaxlib {importlib.metadata.version('jaxlib')}, "
+        f"Python {platform.python_version()})")
+
+
 class ComputationStarted(Exception):
     """Raised by the stand-ins of ``no_computation``: the computation began."""
 
@@ -437,7 +451,9 @@ def test_optimise_warns_as_jmse_does_for_designs_beyond_the_checked_strength(cap
 def test_optimise_prints_the_warnings_of_the_designs_it_tried_once(capsys, monkeypatch):
     """The designs the optimiser tries are checked by jmse when its program runs (traced:
     warnings without values, ``_design_check``); the command prints each text once, as its
-    own warning line, after the run."""
+    own warning line, after the run. A warning that is not the library's (here a NumPy-like
+    RuntimeWarning from the optimiser's loop) is not relabelled as jmse-jax's: it goes back
+    to Python's warnings, once, with its category and source."""
     from jmse_jax._merit import _TRACED_DESIGN, _strength_message
 
     text = _strength_message(_TRACED_DESIGN)
@@ -445,13 +461,47 @@ def test_optimise_prints_the_warnings_of_the_designs_it_tried_once(capsys, monke
 
     def fake_optimise(start, variables, **options):
         for _ in range(3):  # a step of the loop each
-            warnings.warn(text, UserWarning, stacklevel=2)
+            warnings.warn(text, jj.AccuracyWarning, stacklevel=2)
+            warnings.warn("overflow encountered in exp", RuntimeWarning, stacklevel=1)
         return _stand_in_result(lens, image_shift=0.0, rms_wavefront=0.1)
 
     monkeypatch.setattr(jj, "optimise", fake_optimise)
-    status, _, err = run_cli(capsys, "optimise")
+    with warnings.catch_warnings(record=True) as passed_on:
+        warnings.simplefilter("always")
+        status, _, err = run_cli(capsys, "optimise")
     assert status == 0
     assert err.count(f"jmse-jax: warning: {' '.join(text.split())}") == 1
+    assert "overflow" not in err
+    assert [(w.category, str(w.message), w.filename) for w in passed_on] == [
+        (RuntimeWarning, "overflow encountered in exp", __file__)]
+
+
+def test_report_warnings_labels_only_the_librarys_own(capsys):
+    """``cli.report_warnings``: AccuracyWarning texts are printed once each as
+    ``jmse-jax: warning:`` lines (whitespace collapsed, none of ``printed``); every other
+    warning is passed on to Python's warnings once per (category, text, place), unlabelled."""
+    from jmse_jax.cli import report_warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(2):
+            warnings.warn("first  jmse\n text", jj.AccuracyWarning, stacklevel=1)
+            warnings.warn("second", jj.AccuracyWarning, stacklevel=1)
+            warnings.warn("already printed", jj.AccuracyWarning, stacklevel=1)
+            warnings.warn("a user warning of another library", UserWarning, stacklevel=1)
+        warnings.warn("a user warning of another library", UserWarning, stacklevel=1)  # elsewhere
+        warnings.warn("deprecated", DeprecationWarning, stacklevel=1)
+    with warnings.catch_warnings(record=True) as passed_on:
+        warnings.simplefilter("always")
+        texts = report_warnings(caught, printed=["already printed"])
+    assert texts == ["first jmse text", "second"]
+    assert capsys.readouterr().err.splitlines() == [
+        "jmse-jax: warning: first jmse text", "jmse-jax: warning: second"]
+    others = [(w.category, str(w.message)) for w in passed_on]
+    assert others == [(UserWarning, "a user warning of another library")] * 2 + [
+        (DeprecationWarning, "deprecated")]
+    assert passed_on[0].lineno != passed_on[1].lineno
+    assert all(w.filename == __file__ for w in passed_on)
 
 
 # --------------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ from conftest import FIG1_BASELINE_B64, FIG1_COEFFICIENTS, FIG1_JMSE
 from scipy import integrate
 
 import jmse_jax as jj
+from jmse_jax import AccuracyWarning
 from jmse_jax._merit import _route
 
 CONVERGED = [p for p in problems.PROBLEMS if p.converged]
@@ -72,7 +73,7 @@ def test_baseline_past_the_cutoff(u):
 
 def test_baseline_warns_when_the_band_spans_few_lags(fig1):
     """u * B < 5 lags per half-band: the rectangle rule is far off, and the caller is told."""
-    with pytest.warns(UserWarning, match=r"u \* B = 1 lags.*B = 5.*Use B >= 25"):
+    with pytest.warns(AccuracyWarning, match=r"u \* B = 1 lags.*B = 5.*Use B >= 25"):
         coarse = float(jj.baseline_jmse(*fig1, B=5))
     assert abs(coarse / FIG1_JMSE - 1) > 0.3  # what the warning is for (SPEC §5's value)
     with warnings.catch_warnings():
@@ -613,13 +614,13 @@ def test_design_beyond_the_checked_strength_warns():
     assert float(jj.aberration_strength(strong, 0.5, 0.5)) > jj.CHECKED_STRENGTH
     message = (r"aberration_strength 426 is beyond what the presets and the default's tiers "
                r"were checked at")
-    with pytest.warns(UserWarning, match=message):
+    with pytest.warns(AccuracyWarning, match=message):
         jj.jmse(strong, 0.5, 0.5, signal, noise, preset="fast")
 
     def merit(w020):
         return jj.jmse(jj.Seidel(w020=w020, w131=2.0), 0.5, 0.5, signal, noise, preset="fast")
 
-    with pytest.warns(UserWarning, match=message) as caught:
+    with pytest.warns(AccuracyWarning, match=message) as caught:
         assert np.isfinite(float(jax.grad(merit)(300.0)))
     assert caught[0].filename == __file__
     with warnings.catch_warnings():
@@ -1091,13 +1092,13 @@ def test_terms_that_cancel_warn_off_the_axis_without_the_balanced_tier():
     of the caller's own give no warning."""
     signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
     design = dict(w020=10.0, w040=-7.0)
-    with pytest.warns(UserWarning, match=r"the terms of the design cancel much of each "
+    with pytest.warns(AccuracyWarning, match=r"the terms of the design cancel much of each "
                                          r"other's wavefront slope: their "
                                          r"aberration_strength taken one by one sums to 6 "
                                          r"times the design's \(from 2.5 at a strength of "
                                          r"2.5 the default and 'high' take a balanced grid\)"):
         jj.jmse(jj.Seidel(**design, w222=1e-7), 1.0, 0.5, signal, noise, preset="fast")
-    with pytest.warns(UserWarning, match=r"sums to 3 times"):
+    with pytest.warns(AccuracyWarning, match=r"sums to 3 times"):
         jj.jmse(jj.Seidel(w020=-10.0, w222=20.0), 1.0, 0.5, signal, noise, preset="fast")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -1158,10 +1159,10 @@ def test_many_waves_at_small_u_take_the_last_tier_and_warn_beyond_it():
     assert float(jmse_fn()(coma, 1.0, 0.2, signal, noise)) == pytest.approx(value, rel=1e-13)
     steeper = jj.Seidel(w131=36.0)
     assert float(jj.aberration_strength(steeper, 1.0, 0.2)) < jj.CHECKED_STRENGTH
-    with pytest.warns(UserWarning, match=r"the wavefront slope max \|grad W\| of 84 "
+    with pytest.warns(AccuracyWarning, match=r"the wavefront slope max \|grad W\| of 84 "
                                          r"\[waves per pupil radius\] is beyond"):
         jj.jmse(steeper, 1.0, 0.2, signal, noise, preset="fast")
-    with pytest.warns(UserWarning, match=r"of 86\.6 \[waves per pupil radius\]"):
+    with pytest.warns(AccuracyWarning, match=r"of 86\.6 \[waves per pupil radius\]"):
         jj.jmse(jj.Seidel(w020=43.3), 0.0, 0.2, signal, noise, preset="fast")
 
 
@@ -1175,7 +1176,7 @@ def test_noise_beyond_the_checked_snr_warns():
     CHECKED_SNR_PEAKS instead (no warning at 1.57e8, one at 1.57e10); a call with grids of
     its own gets none."""
     near_axis, signal = jj.Seidel(w020=6.0, w222=0.5), jj.MarkovSignal(1.0, 5.0)
-    with pytest.warns(UserWarning, match=r"peak signal-to-noise ratio max S_x/S_n = 1\.57e\+07 "
+    with pytest.warns(AccuracyWarning, match=r"peak signal-to-noise ratio max S_x/S_n = 1\.57e\+07 "
                                          r"is beyond what the polar grids of 'fast' and "
                                          r"the default"):
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-5), preset="fast")
@@ -1185,7 +1186,7 @@ def test_noise_beyond_the_checked_snr_warns():
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-7), nodes=(8, 4),
                 se_nodes=(16, 8), overlap_nodes=(8, 8))
         jj.jmse(jj.Seidel(w020=6.0), 0.0, 0.2, signal, jj.WhiteNoise(1e-6), preset="fast")
-    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond what the grids "
+    with pytest.warns(AccuracyWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond what the grids "
                                          r"with closed-form peaks \(peaks=True outside the "
                                          r"default's tiers, as in preset='high', and the "
                                          r"one-ray plans of designs on the axis\) were "
@@ -1199,12 +1200,12 @@ def test_noise_beyond_the_checked_snr_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-5), preset="fast", peaks=True)
-    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+09 is beyond what the grids "
+    with pytest.warns(AccuracyWarning, match=r"max S_x/S_n = 1\.57e\+09 is beyond what the grids "
                                          r"with closed-form peaks"):
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-7), preset="fast", peaks=True)
     # The default's tiers keep CHECKED_SNR with peaks=True: their steep tier has the peaks
     # and was 4.7e-4 off at 1.1e8 under a flat spectrum (default_climb.py --noise).
-    with pytest.warns(UserWarning, match=r"1\.57e\+07 is beyond what the polar grids of 'fast' "
+    with pytest.warns(AccuracyWarning, match=r"1\.57e\+07 is beyond what the polar grids of 'fast' "
                                          r"and the default"):
         jj.jmse(near_axis, 0.1, 0.2, signal, jj.WhiteNoise(1e-5), peaks=True)
 
@@ -1224,16 +1225,17 @@ def test_traced_design_with_concrete_spectra_warns_beyond_the_checked_snr():
                            jj.WhiteNoise(noise), **options)
         return jax.make_jaxpr(merit)(jnp.array([6.0, 0.5]))
 
-    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+07 is beyond what the polar "
+    with pytest.warns(AccuracyWarning, match=r"max S_x/S_n = 1\.57e\+07 is beyond what the polar "
                                          r"grids of 'fast' and the default.*The design is "
                                          r"traced here \(jit or vmap\).*a rotationally "
                                          r"symmetric one \(on the axis\), which takes the "
                                          r"one-ray plan, was checked to 2e\+08"):
         traced(1e-5, preset="fast")
-    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond what the grids "
+    with pytest.warns(AccuracyWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond what the grids "
                                          r"with closed-form peaks"):
         traced(1e-8, preset="high")
-    with pytest.warns(UserWarning, match=r"1\.57e\+10 is beyond what the polar grids") as caught:
+    with pytest.warns(AccuracyWarning,
+                      match=r"1\.57e\+10 is beyond what the polar grids") as caught:
         traced(1e-8, preset="fast")
     assert all("The design is traced" not in str(w.message) for w in caught)
     with warnings.catch_warnings():
@@ -1358,7 +1360,7 @@ def test_run_time_checks_off_gives_the_same_numbers_without_a_callback(with_run_
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             off = [unchecked(w) for w in (1.0, strong)]
-    with pytest.warns(UserWarning, match="of a design in a traced call is beyond"):
+    with pytest.warns(AccuracyWarning, match="of a design in a traced call is beyond"):
         on = [jax.block_until_ready(checked(w)) for w in (1.0, strong)]
     for (value_on, grad_on), (value_off, grad_off) in zip(on, off, strict=True):
         assert float(value_off) == float(value_on)

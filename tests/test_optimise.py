@@ -13,7 +13,10 @@ import pytest  # noqa: E402
 from small_tiers import SMALL_TIERS, tiers_without_one_ray  # noqa: E402
 
 import jmse_jax  # noqa: E402
-from jmse_jax import lens as jl  # noqa: E402
+from jmse_jax import (  # noqa: E402
+    AccuracyWarning,
+    lens as jl,
+)
 from jmse_jax._merit import _route  # noqa: E402
 from jmse_jax._optimise import _get, _parse, _set, lens_merit, optimise  # noqa: E402
 
@@ -356,7 +359,7 @@ def test_noise_beyond_the_checked_snr_warns_in_lens_merit_and_optimise():
                  fields=(1.5,))
     for fn in (lambda **kw: lens_merit(lens, **kw),
                lambda **kw: optimise(lens, ("image_shift",), **kw)):
-        with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond"):
+        with pytest.warns(AccuracyWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond"):
             with pytest.raises(ValueError, match="fields must be in"):
                 fn(**noisy)
         with warnings.catch_warnings():
@@ -374,8 +377,9 @@ def test_noise_beyond_the_checked_snr_warns_in_lens_merit_and_optimise():
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match="fields must be in"):
             lens_merit(lens, **high)
-    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+08 is beyond what the gradients "
-                                         r"of the polar grids were checked at off the axis"):
+    with pytest.warns(AccuracyWarning,
+                      match=r"max S_x/S_n = 1\.57e\+08 is beyond what the gradients "
+                            r"of the polar grids were checked at off the axis"):
         with pytest.raises(ValueError, match="fields must be in"):
             optimise(lens, ("image_shift",),
                      **dict(high, jmse_options={"preset": "high", "se_angular": 960}))
@@ -388,6 +392,6 @@ def test_noise_beyond_the_checked_snr_warns_in_lens_merit_and_optimise():
         with pytest.raises(ValueError, match="fields must be in"):
             optimise(lens, ("image_shift",), merit="rms",
                      **dict(high, jmse_options={"preset": "high", "se_angular": 960}))
-    with pytest.warns(UserWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond"):
+    with pytest.warns(AccuracyWarning, match=r"max S_x/S_n = 1\.57e\+10 is beyond"):
         with pytest.raises(ValueError, match="fields must be in"):
             optimise(lens, ("image_shift",), merit="rms", **noisy)

@@ -13,6 +13,7 @@ import oracles
 import pytest
 
 import jmse_jax as jj
+from jmse_jax import AccuracyWarning
 
 HIGH = (64, 64)  # overlap nodes for the high-order comparisons
 
@@ -324,7 +325,7 @@ def test_too_few_overlap_nodes_warn():
     nodes, or a mild design, are quiet."""
     coma = jj.Seidel(w131=12.0)
     nu = jnp.linspace(0.05, 0.95, 10)
-    with pytest.warns(UserWarning, match=r"nodes=\(32, 32\) may be too few .* about "
+    with pytest.warns(AccuracyWarning, match=r"nodes=\(32, 32\) may be too few .* about "
                                          r"nodes=\((\d+), \1\) holds 1e-6"):
         coarse = jj.otf(coma, nu, 0.2, 1.0)
     fine = jj.otf(coma, nu, 0.2, 1.0, nodes=(160, 160))
@@ -346,7 +347,7 @@ def test_coma_warns_where_its_curved_phase_difference_needs_more_nodes():
     session 79's audit)."""
     coma = jj.Seidel(w131=10.0)
     nu = jnp.linspace(0.0, 0.999, 120)
-    with pytest.warns(UserWarning, match=r"nodes=\(32, 32\) may be too few"):
+    with pytest.warns(AccuracyWarning, match=r"nodes=\(32, 32\) may be too few"):
         coarse = jj.otf(coma, 0.0 * nu, nu, 1.0)
     fine = jj.otf(coma, 0.0 * nu, nu, 1.0, nodes=(160, 160))
     assert float(jnp.max(jnp.abs(coarse - fine))) > 1e-5

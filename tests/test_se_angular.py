@@ -23,6 +23,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jmse_jax as jj  # noqa: E402
+from jmse_jax import AccuracyWarning  # noqa: E402
 from jmse_jax._merit import (  # noqa: E402
     CHECKED_SNR,
     CHECKED_SNR_PEAKS,
@@ -223,13 +224,13 @@ def test_optimise_warns_for_high_only_with_too_few_angular_nodes():
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match="fields must be in"):
             jj.optimise(lens, ("image_shift",), jmse_options={"preset": "high"}, **kwargs)
-    with pytest.warns(UserWarning, match=rf"1\.57e\+08 .* with their own counts .* "
+    with pytest.warns(AccuracyWarning, match=rf"1\.57e\+08 .* with their own counts .* "
                                          rf"Give se_angular={count}, otf_radial={radial} "):
         with pytest.raises(ValueError, match="fields must be in"):
             jj.optimise(lens, ("image_shift",),
                         jmse_options={"preset": "high", "se_angular": 960}, **kwargs)
     # The angular count given, the radial count named alone.
-    with pytest.warns(UserWarning, match=rf"Give otf_radial={radial} "):
+    with pytest.warns(AccuracyWarning, match=rf"Give otf_radial={radial} "):
         with pytest.raises(ValueError, match="fields must be in"):
             jj.optimise(lens, ("image_shift",),
                         jmse_options={"preset": "high", "se_angular": count}, **kwargs)
@@ -400,7 +401,7 @@ def test_traced_spectra_warn_at_run_time(small_radial_table, with_run_time_check
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         jax.block_until_ready(program(STEEP_C, jnp.full(2, 100 * STEEP_NOISE)))
-    with pytest.warns(UserWarning, match=r"peak S_x / S_n of 1\.5e\+07.*with 48 angular fine "
+    with pytest.warns(AccuracyWarning, match=r"peak S_x / S_n of 1\.5e\+07.*with 48 angular fine "
                                          r"S_e nodes, 24 radial OTF nodes.*pass "
                                          rf"grad_se_angular=1920, grad_otf_radial="
                                          rf"{STEEP_RADIAL} "):
@@ -417,7 +418,7 @@ def test_traced_spectra_warn_at_run_time(small_radial_table, with_run_time_check
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         jax.block_until_ready(values(STEEP_C, jnp.full(2, 100 * STEEP_NOISE)))
-    with pytest.warns(UserWarning, match=r"jmse's value at a peak S_x / S_n of 1\.5e\+07.*"
+    with pytest.warns(AccuracyWarning, match=r"jmse's value at a peak S_x / S_n of 1\.5e\+07.*"
                                          r"with 24 radial OTF nodes: .*OTF_RADIAL_BY_SNR\).*"
                                          rf"pass otf_radial={STEEP_RADIAL} "):
         traced = jax.block_until_ready(
@@ -430,7 +431,7 @@ def test_traced_spectra_warn_at_run_time(small_radial_table, with_run_time_check
             STEEP_C, jnp.array([100 * STEEP_NOISE, STEEP_NOISE]))
     assert np.array_equal(np.asarray(quiet), np.asarray(traced))
     # Beyond CHECKED_SNR_PEAKS no count was checked, and the warning says so.
-    with pytest.warns(UserWarning, match=r"peak S_x / S_n of 1\.5e\+09.*pass otf_radial="
+    with pytest.warns(AccuracyWarning, match=r"peak S_x / S_n of 1\.5e\+09.*pass otf_radial="
                                          rf"{STEEP_RADIAL} .*beyond 2e\+08 "
                                          r"\(CHECKED_SNR_PEAKS\) no counts were checked"):
         jax.block_until_ready(values(STEEP_C, jnp.array([STEEP_NOISE, STEEP_NOISE / 100])))

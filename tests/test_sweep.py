@@ -18,7 +18,7 @@ import pytest
 jax.config.update("jax_enable_x64", True)
 
 import jmse_jax as jj  # noqa: E402
-from jmse_jax import SweepStatus  # noqa: E402
+from jmse_jax import AccuracyWarning, SweepStatus  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -501,7 +501,7 @@ def test_sweep_jmse_gives_the_eager_calls_warnings(monkeypatch):
     strength = [float(jj.aberration_strength(jj.Seidel(w020=w, w131=0.3), 0.5, 0.2))
                 for w in w020[:3]]
     assert strength[0] < jj.CHECKED_STRENGTH < strength[1] < strength[2]
-    with pytest.warns(UserWarning) as eager:  # the oracle: the strongest design, eager
+    with pytest.warns(AccuracyWarning) as eager:  # the oracle: the strongest design, eager
         jj.jmse(jj.Seidel(w020=60.0, w131=0.3), 0.5, 0.2, SIGNAL, NOISE, preset="fast")
     message = str(eager[0].message)
     assert f"aberration_strength {strength[2]:.3g} is beyond" in message
