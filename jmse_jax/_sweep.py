@@ -38,6 +38,8 @@ from ._aberrations import Seidel
 from ._merit import (
     _CHECKED_ALREADY,
     _GRID_OPTIONS,
+    CHECKED_SNR,
+    CHECKED_SNR_PEAKS,
     U_MAX,
     _beyond_checked,
     _cancellation_message,
@@ -118,6 +120,13 @@ class SweepResult:
     metadata : dict
         JSON-serialisable description: devices, batch size, padding, timings, compiled
         memory, JAX version, and the user's own ``metadata``.
+    beyond_checked : ndarray of bool, shape (n,), or None
+        ``sweep_jmse`` with a preset's grids: True for each design beyond what its preset
+        was checked at (the designs ``sweep_jmse``'s ``AccuracyWarning`` counts: strength,
+        wavefront slope, cancelling terms, peak ``S_x / S_n``), whose value is finite but
+        may be off by more than the preset's accuracy. False for the rest, and for designs
+        whose status is not ``OK``. None where nothing was checked (``sweep``, or grid
+        options given).
     """
 
     inputs: Any
@@ -126,6 +135,7 @@ class SweepResult:
     aux: Any
     status: np.ndarray
     metadata: dict
+    beyond_checked: np.ndarray | None = None
 
     @property
     def n_designs(self) -> int:
@@ -169,6 +179,9 @@ class SweepResult:
             "trees": trees,
             "metadata": self.metadata,
         }
+        if self.beyond_checked is not None:
+            arrays["beyond_checked"] = np.asarray(self.beyond_checked, dtype=bool)
+            header["n_beyond_checked"] = int(arrays["beyond_checked"].sum())
         try:  # strict JSON: a non-finite metadata value is refused, not written as NaN
             text = json.dumps(header, indent=2, default=_json_default, allow_nan=False)
         except ValueError:
@@ -202,11 +215,15 @@ class SweepResult:
                 f"{path} is not a jmse_jax sweep result (format {header.get('format')!r})"
             )
         groups = {g: _decode_tree(spec, arrays) for g, spec in header["trees"].items()}
-        return cls(status=arrays["status"], metadata=header["metadata"], **groups)
+        return cls(status=arrays["status"], metadata=header["metadata"],
+                   beyond_checked=arrays.get("beyond_checked"), **groups)
 
     def __repr__(self) -> str:
         counts = ", ".join(f"{k}={v}" for k, v in self.status_counts().items())
-        return f"SweepResult(n_designs={self.n_designs}, grad={self.grad is not None}, {counts})"
+        beyond = ("" if self.beyond_checked is None
+                  else f", beyond_checked={int(np.sum(self.beyond_checked))}")
+        return (f"SweepResult(n_designs={self.n_designs}, grad={self.grad is not None}, "
+                f"{counts}{beyond})")
 
 
 def _json_default(value):
@@ -270,7 +287,7 @@ def _encode_tree(tree, name: str, arrays: dict) -> dict:
                 "fields": fields, "static": static, "children": children}
     if isinstance(tree, (np.ndarray, np.generic, jax.Array, float, int, complex, bool)):
         key = f"{name}"
-        if key in arrays or key in ("status", "__header__"):
+        if key in arrays or key in ("status", "beyond_checked", "__header__"):
             raise ValueError(f"cannot save: two leaves would be stored under {key!r}")
         arrays[key] = np.asarray(tree)
         return {"node": "leaf", "key": key}
@@ -816,7 +833,8 @@ def _choice_program(static):
     return jax.jit(jax.vmap(one))
 
 
-def warn_like_jmse(aberrations, field, u, signal, noise, options, stacklevel: int = 2):
+def warn_like_jmse(aberrations, field, u, signal, noise, options, stacklevel: int = 2,
+                   warn: bool = True):
     """The warnings an eager ``jmse`` call gives a concrete design, for a batch of designs
     that run traced (under ``vmap`` ``jmse`` gives them only when the program runs, without
     the values: ``_design_check``): ``aberration_strength``
@@ -833,17 +851,23 @@ def warn_like_jmse(aberrations, field, u, signal, noise, options, stacklevel: in
     symmetry of each design are the library's own choice of plan (``_concrete_choice``,
     compiled once per static and batch size), the bounds ``_beyond_checked``'s, the noise
     check ``_warn_beyond_checked_snr``'s. ``stacklevel``: ``warnings.warn``'s, here (2 names
-    the line that called this)."""
+    the line that called this). ``warn=False``: the mask only.
+
+    Returns the designs beyond a bound (``SweepResult.beyond_checked``): bool, shape (n,),
+    False for those left out; the peak ratio per design by its own ``u`` and symmetry, as
+    the run-time check of a traced call has it (``_design_check``). None with grid
+    options."""
     if any(options.get(name) is not None for name in _GRID_OPTIONS):
-        return  # the caller's own grids: jmse gives no such warning either
-    designs, _ = _host_batch({"aberrations": aberrations, "field": field, "u": u})
+        return None  # the caller's own grids: jmse gives no such warning either
+    designs, n_all = _host_batch({"aberrations": aberrations, "field": field, "u": u})
     field, u = designs["field"], designs["u"]
     finite = np.all([np.isfinite(leaf).reshape(leaf.shape[0], -1).all(axis=1)
                      for leaf in jax.tree_util.tree_leaves(designs)], axis=0)
     keep = finite & (field >= 0.0) & (field <= 1.0) & (u > 0.0) & (u <= U_MAX)
+    mask = np.zeros(n_all, bool)
     n = int(keep.sum())
     if n == 0:
-        return
+        return mask
     designs = jax.tree_util.tree_map(lambda x: x[keep], designs)
     ordered = (designs["aberrations"], designs["field"], designs["u"])
     resolved = jmse_options(**options)
@@ -857,10 +881,21 @@ def warn_like_jmse(aberrations, field, u, signal, noise, options, stacklevel: in
         block = jax.tree_util.tree_map(lambda x, index=index: x[index], ordered)
         parts.append([np.asarray(x)[: n - start] for x in choice(*block)])
     symmetric, strength, cancellation = (np.concatenate(x) for x in zip(*parts, strict=True))
+    symmetric = symmetric.astype(bool)
     u = designs["u"]
     balanced = static.value[4] is not None
     strong, steep, cancelling, slope = _beyond_checked(strength, u, symmetric, cancellation,
                                                        balanced=balanced)
+    snr_peaks = _snr_peaks(resolved["peaks"], resolved["tiers"])
+    values, inverse = np.unique(u, return_inverse=True)
+    ratios = jax.vmap(_peak_snr, (0, None, None))
+    # In chunks: a sweep may hold a million distinct u, each a 17 x 17 grid here.
+    peak = np.concatenate([np.asarray(ratios(values[i:i + _PEAK_CHUNK], signal, noise))
+                           for i in range(0, values.size, _PEAK_CHUNK)])[inverse.reshape(-1)]
+    noisy = peak > np.where(symmetric | snr_peaks, CHECKED_SNR_PEAKS, CHECKED_SNR)
+    mask[keep] = strong | steep | cancelling | noisy
+    if not warn:
+        return mask
     cancelling_message = functools.partial(_cancellation_message, balanced=balanced)
     for message, beyond, values in ((_strength_message, strong, strength),
                                     (_slope_message, steep, slope),
@@ -870,10 +905,11 @@ def warn_like_jmse(aberrations, field, u, signal, noise, options, stacklevel: in
                                          int(beyond.sum()), n),
                           AccuracyWarning, stacklevel=stacklevel)
     # The one-ray plans integrate the peaks in closed form, as peaks=True does.
-    off_axis = ~symmetric.astype(bool)
+    off_axis = ~symmetric
     u_max = jnp.asarray(np.max(u[off_axis] if off_axis.any() else u), u.dtype)
-    peaks = (not off_axis.any()) or _snr_peaks(resolved["peaks"], resolved["tiers"])
+    peaks = (not off_axis.any()) or snr_peaks
     _warn_beyond_checked_snr(u_max, signal, noise, stacklevel=stacklevel + 1, peaks=peaks)
+    return mask
 
 
 #: Distinct ``u`` per evaluation of the peak ratios in ``_with_sweep_counts``.
@@ -953,7 +989,8 @@ def sweep_jmse(
         Before the sweep the designs get the warnings an eager ``jmse`` call gives
         (``warn_like_jmse``: strength, wavefront slope, cancelling terms, peak ``S_x /
         S_n`` beyond what the preset was checked at), one per kind with the largest value
-        and the number of designs; none with grid options given, as in ``jmse``.
+        and the number of designs; none with grid options given, as in ``jmse``. Which
+        designs they concern is the result's ``beyond_checked``.
     batch_size, chunks_per_call, devices, workers, progress, metadata
         As in ``sweep``.
 
@@ -963,6 +1000,9 @@ def sweep_jmse(
         ``inputs`` is ``{"aberrations": ..., "field": ..., "u": ...}``. Designs with a
         field outside ``[0, 1]`` or ``u`` outside ``(0, 1.5]`` get ``SweepStatus.INVALID``
         and non-finite ones ``NONFINITE_INPUT``; the value of both is ``+inf``.
+        ``beyond_checked`` marks the designs beyond the preset's checked range (with a
+        preset's grids): ``result.ok & ~result.beyond_checked`` selects the values held to
+        the preset's accuracy.
 
     Examples
     --------
@@ -994,11 +1034,13 @@ def sweep_jmse(
     u = np.asarray(u, float) if isinstance(u, (list, tuple)) else u
     options = _with_sweep_counts(preset, options, resolved, u, signal, noise)
     checked = _CHECKED_ALREADY.get()
-    if not checked and is_concrete((aberrations, field, u)):
+    beyond = None
+    if is_concrete((aberrations, field, u)):
         # Under vmap jmse gives its warnings only when the program runs, without the
-        # designs' values: given here, with them, before anything is compiled.
-        warn_like_jmse(aberrations, field, u, signal, noise, dict(options, preset=preset),
-                       stacklevel=3)
+        # designs' values: given here, with them, before anything is compiled (unless the
+        # caller gave them), and which designs they concern kept in the result.
+        beyond = warn_like_jmse(aberrations, field, u, signal, noise,
+                                dict(options, preset=preset), stacklevel=3, warn=not checked)
         checked = True
 
     def in_range(design):
@@ -1016,6 +1058,9 @@ def sweep_jmse(
         return jnp.where(in_range(design), value, jnp.inf)
 
     batch = {"aberrations": aberrations, "field": field, "u": u}
-    return sweep(merit, batch, grad=grad, valid=in_range, batch_size=batch_size,
-                 chunks_per_call=chunks_per_call, devices=devices, workers=workers,
-                 progress=progress, metadata=metadata)
+    result = sweep(merit, batch, grad=grad, valid=in_range, batch_size=batch_size,
+                   chunks_per_call=chunks_per_call, devices=devices, workers=workers,
+                   progress=progress, metadata=metadata)
+    if beyond is None:
+        return result
+    return dataclasses.replace(result, beyond_checked=beyond & result.ok)

@@ -658,15 +658,23 @@ def _cmd_sweep(args) -> int:
     values = np.asarray(result.value)
     ok = result.ok
     print(f"status: {result.status_counts()}")
+    beyond = result.beyond_checked
+    n_beyond = None if beyond is None else int(beyond.sum())
+    if n_beyond:
+        print(f"beyond the checked range (warned above): {n_beyond} of {n} designs, marked "
+              f"in sweep.npz's beyond_checked")
     if ok.any():
         best = int(np.argmin(np.where(ok, values, np.inf)))
         design = ", ".join(f"{k} = {cube[k][best]:g}" for k in axes)
-        print(f"JMSE min {values[ok].min():.6e}, max {values[ok].max():.6e}; best: {design}")
+        caveat = " (beyond the checked range)" if beyond is not None and beyond[best] else ""
+        print(f"JMSE min {values[ok].min():.6e}, max {values[ok].max():.6e}; best: {design}"
+              f"{caveat}")
     compile_s, run_s = result.metadata.get("compile_s"), result.metadata.get("run_s")
     seconds = None if compile_s is None or run_s is None else compile_s + run_s
     # A design that failed has JMSE +inf: written as null (strict JSON), see its status.
     summary = dict(n_designs=n, axes=axes, preset=args.preset, dtype=args.dtype,
-                   status_counts=result.status_counts(), jmse=values.tolist(), npz=str(path),
+                   status_counts=result.status_counts(), n_beyond_checked=n_beyond,
+                   jmse=values.tolist(), npz=str(path),
                    seconds=seconds, compile_s=compile_s, run_s=run_s)
     _write_json(os.path.join(args.out, "sweep_summary.json"), summary)
     print(f"wrote {path} and {path.with_suffix('.json')}")

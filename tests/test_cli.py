@@ -602,13 +602,33 @@ def test_sweep_writes_npz_and_json(capsys, tmp_path):
     assert result.metadata["workers"] == 2
     assert (tmp_path / "sweep.json").is_file()
     summary = json.loads((tmp_path / "sweep_summary.json").read_text())
-    assert summary["n_designs"] == 6
+    assert summary["n_designs"] == 6 and summary["n_beyond_checked"] == 0
+    assert not result.beyond_checked.any() and "beyond the checked range" not in out
     assert summary["seconds"] > 0 and summary["preset"] == "fast"
     assert result.metadata["user"]["preset"] == "fast"
     # Second design: w020 = -1, field = 1 (last axis fastest).
     expected = float(jj.jmse(jj.Seidel(w020=-1.0, w222=0.5), 1.0, 0.2,
                              jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3), preset="fast"))
     assert np.asarray(result.value)[1] == pytest.approx(expected, rel=1e-10)
+
+
+def test_sweep_reports_which_designs_are_beyond_the_checked_range(capsys, tmp_path):
+    """The designs the warning counts are marked in sweep.npz (``beyond_checked``) and
+    counted in the summary; the best design says when it is one of them. Oracle:
+    ``aberration_strength`` of the second design beyond ``CHECKED_STRENGTH``."""
+    strong = jj.Seidel(w020=-60.0, w131=0.3)
+    assert float(jj.aberration_strength(strong, 0.5, 0.2)) > jj.CHECKED_STRENGTH
+    status, out, err = run_cli(capsys, "sweep", "--axis", "w020=-1,-60,2", "--w131", "0.3",
+                               "--field", "0.5", "--quiet", "--out", str(tmp_path))
+    assert status == 0
+    assert warnings_of(err)[0].startswith("jmse-jax: warning: aberration_strength up to ")
+    assert "beyond the checked range (warned above): 1 of 2 designs" in out
+    result = jj.SweepResult.load(tmp_path / "sweep.npz")
+    assert result.beyond_checked.tolist() == [False, True]
+    summary = json.loads((tmp_path / "sweep_summary.json").read_text())
+    assert summary["n_beyond_checked"] == 1
+    best_is_strong = int(np.argmin(result.value)) == 1
+    assert ("(beyond the checked range)" in out) == best_is_strong
 
 
 @pytest.mark.parametrize("argv, words", [

@@ -467,7 +467,12 @@ def _sweep_warnings(monkeypatch, *args, **options):
     a stand-in: the warnings come before anything is swept."""
     import jmse_jax._sweep as sweep_module
 
-    monkeypatch.setattr(sweep_module, "sweep", lambda *a, **k: None)
+    def stand_in(fn, batch, **options):  # all OK: the warnings are what is looked at
+        n = sweep_module._host_batch(batch)[1]
+        return jj.SweepResult(inputs=batch, value=None, grad=None, aux=None,
+                              status=np.zeros(n, np.int8), metadata={})
+
+    monkeypatch.setattr(sweep_module, "sweep", stand_in)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         jj.sweep_jmse(*args, progress=False, **options)
@@ -522,3 +527,67 @@ def test_sweep_jmse_gives_the_eager_calls_warnings(monkeypatch):
                            NOISE, preset="fast") == []
     with _checked_already():
         assert _sweep_warnings(monkeypatch, ab, field, 0.2, SIGNAL, NOISE, preset="fast") == []
+
+
+def _eager_warns(monkeypatch, aberrations, field, u, signal, noise, **options) -> bool:
+    """Whether a concrete ``jmse`` call on one design gives an ``AccuracyWarning``: the
+    oracle of ``beyond_checked``. Its computation, which comes after its checks, is replaced
+    by a stand-in that stops the call (``_merit._eager_tier_choice``)."""
+    import jmse_jax._merit as merit
+
+    class Stop(Exception):
+        pass
+
+    def stop(*args, **kwargs):
+        raise Stop
+
+    with monkeypatch.context() as patch:
+        patch.setattr(merit, "_eager_tier_choice", stop)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with pytest.raises(Stop):
+                jj.jmse(aberrations, field, u, signal, noise, **options)
+    return any(issubclass(w.category, AccuracyWarning) for w in caught)
+
+
+def test_sweep_jmse_marks_the_designs_beyond_the_checked_range(monkeypatch, tmp_path):
+    """``SweepResult.beyond_checked``: per design, whether a concrete ``jmse`` call on it
+    warns (the oracle, ``_eager_warns``), for designs beyond the checked strength, slope
+    and cancellation and inside it, on and off the axis, at a noise whose peak ratio is
+    between ``CHECKED_SNR`` and ``CHECKED_SNR_PEAKS`` (beyond for designs off the axis only:
+    on it the one-ray plans integrate the peaks in closed form); False for designs whose
+    status is not OK; kept by ``save`` / ``load``; None with grid options."""
+    designs = [  # (w020, w040, w131, field, u)
+        (1.0, 0.0, 0.3, 0.5, 0.2),     # inside
+        (40.0, 0.0, 0.5, 0.5, 0.2),    # slope beyond CHECKED_SLOPE, strength inside
+        (60.0, 0.0, 0.3, 0.5, 0.2),    # strength beyond CHECKED_STRENGTH
+        (-6.0, 6.0, 0.3, 0.5, 0.3),    # terms that cancel ('fast' has no balanced grid)
+        (1.0, 0.0, 0.0, 0.0, 0.2),     # on the axis
+        (np.nan, 0.0, 0.3, 0.5, 0.2),  # not finite: NONFINITE_INPUT
+        (60.0, 0.0, 0.3, 1.5, 0.2),    # field out of range: INVALID
+    ]
+    w020, w040, w131, field, u = (np.array(x) for x in zip(*designs, strict=True))
+    ab = jj.Seidel(w020=w020, w040=w040, w131=w131)
+    peak = float(SIGNAL(jnp.zeros(()), jnp.zeros(())))
+    low = jj.WhiteNoise(peak / 1e7)  # a peak ratio of 1e7
+    assert jj.CHECKED_SNR < 1e7 < jj.CHECKED_SNR_PEAKS
+    for noise in (NOISE, low):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", AccuracyWarning)
+            result = jj.sweep_jmse(ab, field, u, SIGNAL, noise, preset="fast", progress=False)
+        expected = [bool(result.ok[i]) and _eager_warns(
+            monkeypatch, jj.Seidel(w020=w020[i], w040=w040[i], w131=w131[i]), field[i],
+            u[i], SIGNAL, noise, preset="fast") for i in range(len(designs))]
+        assert result.beyond_checked.tolist() == expected
+        if noise is NOISE:
+            assert expected == [False, True, True, True, False, False, False]
+        else:
+            assert expected == [True, True, True, True, False, False, False]
+        loaded = jj.SweepResult.load(result.save(tmp_path / "sweep"))
+        assert loaded.beyond_checked.tolist() == expected
+        assert f"beyond_checked={sum(expected)}" in repr(loaded)
+    assert jj.sweep_jmse(ab, field, u, SIGNAL, NOISE, preset="fast", progress=False,
+                         se_nodes=(200, 64)).beyond_checked is None
+    plain = jj.sweep(lambda x: x ** 2, np.arange(3.0), progress=False)
+    assert plain.beyond_checked is None
+    assert jj.SweepResult.load(plain.save(tmp_path / "plain")).beyond_checked is None
