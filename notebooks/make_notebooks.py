@@ -155,6 +155,12 @@ ab = jj.Seidel(w020=cube["w020"], w222=cube["w222"], w040=0.5)
 result = jj.sweep_jmse(ab, 0.95, 0.2, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3),
                        preset="fast", progress=False)
 result, result.status_counts(), result.metadata["workers"]"""),
+        ("md", """\
+A design beyond what the preset was checked at (too strong, too steep, terms that cancel, a
+noise too low) gets a warning before the sweep, and is marked in `result.beyond_checked`:
+`result.ok & ~result.beyond_checked` selects the values held to the preset's accuracy."""),
+        ("code", """\
+int(result.beyond_checked.sum()), int((result.ok & ~result.beyond_checked).sum())"""),
         ("code", """\
 grid = np.asarray(result.value).reshape(5, 3)
 plt.imshow(np.log10(grid).T, origin="lower", aspect="auto", extent=(-3, 3, -1.5, 1.5))
