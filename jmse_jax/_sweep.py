@@ -126,7 +126,7 @@ class SweepResult:
         wavefront slope, cancelling terms, peak ``S_x / S_n``), whose value is finite but
         may be off by more than the preset's accuracy. False for the rest, and for designs
         whose status is not ``OK``. None where nothing was checked (``sweep``, or grid
-        options given).
+        options given). ``in_checked_range`` selects the rest of the OK designs.
     """
 
     inputs: Any
@@ -146,6 +146,15 @@ class SweepResult:
     def ok(self) -> np.ndarray:
         """Boolean mask, shape (n,): designs whose status is ``SweepStatus.OK``."""
         return self.status == SweepStatus.OK
+
+    @property
+    def in_checked_range(self) -> np.ndarray:
+        """Boolean mask, shape (n,): designs whose status is OK and that are not
+        ``beyond_checked`` (the values held to the preset's accuracy); ``ok`` where nothing
+        was checked (``beyond_checked`` is None)."""
+        if self.beyond_checked is None:
+            return self.ok
+        return self.ok & ~np.asarray(self.beyond_checked, bool)
 
     def status_counts(self) -> dict[str, int]:
         """Number of designs per status name (only statuses that occur)."""
@@ -1001,8 +1010,8 @@ def sweep_jmse(
         field outside ``[0, 1]`` or ``u`` outside ``(0, 1.5]`` get ``SweepStatus.INVALID``
         and non-finite ones ``NONFINITE_INPUT``; the value of both is ``+inf``.
         ``beyond_checked`` marks the designs beyond the preset's checked range (with a
-        preset's grids): ``result.ok & ~result.beyond_checked`` selects the values held to
-        the preset's accuracy.
+        preset's grids): ``result.in_checked_range`` selects the values held to the
+        preset's accuracy.
 
     Examples
     --------

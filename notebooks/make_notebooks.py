@@ -158,9 +158,9 @@ result, result.status_counts(), result.metadata["workers"]"""),
         ("md", """\
 A design beyond what the preset was checked at (too strong, too steep, terms that cancel, a
 noise too low) gets a warning before the sweep, and is marked in `result.beyond_checked`:
-`result.ok & ~result.beyond_checked` selects the values held to the preset's accuracy."""),
+`result.in_checked_range` selects the values held to the preset's accuracy."""),
         ("code", """\
-int(result.beyond_checked.sum()), int((result.ok & ~result.beyond_checked).sum())"""),
+int(result.ok.sum()), int(result.in_checked_range.sum())"""),
         ("code", """\
 grid = np.asarray(result.value).reshape(5, 3)
 plt.imshow(np.log10(grid).T, origin="lower", aspect="auto", extent=(-3, 3, -1.5, 1.5))

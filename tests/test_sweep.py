@@ -579,6 +579,8 @@ def test_sweep_jmse_marks_the_designs_beyond_the_checked_range(monkeypatch, tmp_
             monkeypatch, jj.Seidel(w020=w020[i], w040=w040[i], w131=w131[i]), field[i],
             u[i], SIGNAL, noise, preset="fast") for i in range(len(designs))]
         assert result.beyond_checked.tolist() == expected
+        assert result.in_checked_range.tolist() == [
+            bool(ok) and not beyond for ok, beyond in zip(result.ok, expected, strict=True)]
         if noise is NOISE:
             assert expected == [False, True, True, True, False, False, False]
         else:
@@ -589,5 +591,5 @@ def test_sweep_jmse_marks_the_designs_beyond_the_checked_range(monkeypatch, tmp_
     assert jj.sweep_jmse(ab, field, u, SIGNAL, NOISE, preset="fast", progress=False,
                          se_nodes=(200, 64)).beyond_checked is None
     plain = jj.sweep(lambda x: x ** 2, np.arange(3.0), progress=False)
-    assert plain.beyond_checked is None
+    assert plain.beyond_checked is None and plain.in_checked_range.tolist() == [True] * 3
     assert jj.SweepResult.load(plain.save(tmp_path / "plain")).beyond_checked is None
