@@ -94,6 +94,7 @@ from ._spectra import (
 from ._sweep import (
     SweepResult as SweepResult,
     SweepStatus as SweepStatus,
+    beyond_checked as beyond_checked,
     hypercube as hypercube,
     sweep as sweep,
     sweep_jmse as sweep_jmse,

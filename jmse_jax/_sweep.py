@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from ._aberrations import Seidel
+from ._aberrations import Seidel, Zernike
 from ._merit import (
     _CHECKED_ALREADY,
     _GRID_OPTIONS,
@@ -55,9 +55,16 @@ from ._merit import (
     jmse,
     jmse_options,
 )
-from ._numerics import AccuracyWarning, all_finite, check_count, is_concrete
+from ._numerics import (
+    AccuracyWarning,
+    all_finite,
+    check_count,
+    check_finite_tree,
+    check_range,
+    is_concrete,
+)
 
-__all__ = ["SweepResult", "SweepStatus", "hypercube", "sweep", "sweep_jmse"]
+__all__ = ["SweepResult", "SweepStatus", "beyond_checked", "hypercube", "sweep", "sweep_jmse"]
 
 #: Default ``batch_size`` of ``sweep`` on GPU and TPU (on CPU the default is 1). On an H100
 #: the singlet sweep with ``jmse`` reached its best measured throughput at 64 designs per
@@ -921,6 +928,78 @@ def warn_like_jmse(aberrations, field, u, signal, noise, options, stacklevel: in
     return mask
 
 
+def _lists_as_arrays(aberrations, field, u):
+    """Lists and tuples among the leaves become float arrays (a list would be read as a
+    pytree of separate scalar leaves)."""
+    def as_array(x):
+        return np.asarray(x, float) if isinstance(x, (list, tuple)) else x
+
+    aberrations = jax.tree_util.tree_map(as_array, aberrations,
+                                         is_leaf=lambda x: isinstance(x, (list, tuple)))
+    return aberrations, as_array(field), as_array(u)
+
+
+def beyond_checked(aberrations, field, u, signal, noise, *, preset: str = "default",
+                   **options):
+    """Whether designs lie beyond what ``preset``'s grids were checked at, without
+    computing their JMSE: the designs a concrete ``jmse`` call warns about
+    (``AccuracyWarning``: ``aberration_strength`` beyond ``CHECKED_STRENGTH``, the wavefront
+    slope beyond ``CHECKED_SLOPE``, terms that cancel beyond ``CHECKED_CANCELLATION``, or
+    ``BALANCED_CANCELLATION`` for a preset without the balanced grid, a peak ``S_x / S_n``
+    beyond ``CHECKED_SNR``, or ``CHECKED_SNR_PEAKS`` with the closed-form peaks and on the
+    axis), for one design or a batch, as ``sweep_jmse`` marks them
+    (``SweepResult.beyond_checked``). For an optimiser's constraint, a screen before a
+    sweep, or a notebook that wants the answer as a value rather than a warning.
+
+    Parameters
+    ----------
+    aberrations, field, u, signal, noise
+        As in ``jmse`` for one design; as in ``sweep_jmse`` for a batch (leaves of leading
+        axis (n,), scalars shared). Concrete values (not traced: under ``jit`` ``jmse``
+        checks its designs when the program runs).
+    preset, **options
+        ``jmse``'s options. Grid options (``nodes``, ``se_nodes``, ...) have no checked range
+        and are refused.
+
+    Returns
+    -------
+    bool for one design (``field`` and ``u`` scalars, the aberrations one design's), else
+    ndarray of bool, shape (n,). In a batch, designs that ``jmse`` refuses (not finite,
+    ``field`` outside [0, 1], ``u`` outside (0, 1.5]) are False; one such design alone
+    raises ``ValueError``, as ``jmse`` does.
+
+    Examples
+    --------
+    >>> import jmse_jax as jj
+    >>> signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    >>> jj.beyond_checked(jj.Seidel(w020=1.0, w131=0.3), 0.5, 0.2, signal, noise)
+    False
+    >>> jj.beyond_checked(jj.Seidel(w020=[1.0, 60.0], w131=0.3), 0.5, 0.2, signal, noise)
+    array([False,  True])
+    """
+    jmse_options(preset, **options)  # ValueError now for a bad option
+    given = [name for name in _GRID_OPTIONS if options.get(name) is not None]
+    if given:
+        raise ValueError(f"beyond_checked: grid options ({', '.join(given)}) have no checked "
+                         f"range; the bounds are those of the presets' own grids")
+    if not is_concrete((aberrations, field, u, signal, noise)):
+        raise TypeError("beyond_checked needs concrete values, got traced ones (under jit, "
+                        "vmap or grad jmse checks its designs when the program runs)")
+    aberrations, field, u = _lists_as_arrays(aberrations, field, u)
+    one = 1 if isinstance(aberrations, Zernike) else 0  # a single design's leaf ndim
+    single = (np.ndim(field) == 0 and np.ndim(u) == 0
+              and all(np.ndim(x) <= one for x in jax.tree_util.tree_leaves(aberrations)))
+    if single:
+        check_finite_tree("aberrations", aberrations)
+        check_range("field", field, 0.0, 1.0)
+        check_range("u", u, 0.0, U_MAX, low_inclusive=False)
+        aberrations, field, u = jax.tree_util.tree_map(
+            lambda x: np.asarray(x)[None], (aberrations, field, u))
+    mask = warn_like_jmse(aberrations, field, u, signal, noise, dict(options, preset=preset),
+                          warn=False)
+    return bool(mask[0]) if single else mask
+
+
 #: Distinct ``u`` per evaluation of the peak ratios in ``_with_sweep_counts``.
 _PEAK_CHUNK = 4096
 
@@ -1025,10 +1104,7 @@ def sweep_jmse(
     ((6,), {'OK': 6})
     """
     resolved = jmse_options(preset, **options)  # ValueError now for a bad option
-    # Lists become arrays (a list would be read as a pytree of separate scalar leaves).
-    aberrations = jax.tree_util.tree_map(
-        lambda x: np.asarray(x, float) if isinstance(x, (list, tuple)) else x, aberrations,
-        is_leaf=lambda x: isinstance(x, (list, tuple)))
+    aberrations, field, u = _lists_as_arrays(aberrations, field, u)
     named = [("field", field), ("u", u)]
     if isinstance(aberrations, Seidel):
         named += [(f"aberrations.{name}", getattr(aberrations, name))
@@ -1039,8 +1115,6 @@ def sweep_jmse(
         if np.ndim(value) > 1:
             raise ValueError(f"{name} must be a scalar or a 1-D array (one value per design), "
                              f"got shape {np.shape(value)}")
-    field = np.asarray(field, float) if isinstance(field, (list, tuple)) else field
-    u = np.asarray(u, float) if isinstance(u, (list, tuple)) else u
     options = _with_sweep_counts(preset, options, resolved, u, signal, noise)
     checked = _CHECKED_ALREADY.get()
     beyond = None

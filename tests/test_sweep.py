@@ -550,6 +550,17 @@ def _eager_warns(monkeypatch, aberrations, field, u, signal, noise, **options) -
     return any(issubclass(w.category, AccuracyWarning) for w in caught)
 
 
+_CHECKED_RANGE_DESIGNS = [  # (w020, w040, w131, field, u)
+    (1.0, 0.0, 0.3, 0.5, 0.2),     # inside
+    (40.0, 0.0, 0.5, 0.5, 0.2),    # slope beyond CHECKED_SLOPE, strength inside
+    (60.0, 0.0, 0.3, 0.5, 0.2),    # strength beyond CHECKED_STRENGTH
+    (-6.0, 6.0, 0.3, 0.5, 0.3),    # terms that cancel ('fast' has no balanced grid)
+    (1.0, 0.0, 0.0, 0.0, 0.2),     # on the axis
+    (np.nan, 0.0, 0.3, 0.5, 0.2),  # not finite: NONFINITE_INPUT
+    (60.0, 0.0, 0.3, 1.5, 0.2),    # field out of range: INVALID
+]
+
+
 def test_sweep_jmse_marks_the_designs_beyond_the_checked_range(monkeypatch, tmp_path):
     """``SweepResult.beyond_checked``: per design, whether a concrete ``jmse`` call on it
     warns (the oracle, ``_eager_warns``), for designs beyond the checked strength, slope
@@ -557,15 +568,7 @@ def test_sweep_jmse_marks_the_designs_beyond_the_checked_range(monkeypatch, tmp_
     between ``CHECKED_SNR`` and ``CHECKED_SNR_PEAKS`` (beyond for designs off the axis only:
     on it the one-ray plans integrate the peaks in closed form); False for designs whose
     status is not OK; kept by ``save`` / ``load``; None with grid options."""
-    designs = [  # (w020, w040, w131, field, u)
-        (1.0, 0.0, 0.3, 0.5, 0.2),     # inside
-        (40.0, 0.0, 0.5, 0.5, 0.2),    # slope beyond CHECKED_SLOPE, strength inside
-        (60.0, 0.0, 0.3, 0.5, 0.2),    # strength beyond CHECKED_STRENGTH
-        (-6.0, 6.0, 0.3, 0.5, 0.3),    # terms that cancel ('fast' has no balanced grid)
-        (1.0, 0.0, 0.0, 0.0, 0.2),     # on the axis
-        (np.nan, 0.0, 0.3, 0.5, 0.2),  # not finite: NONFINITE_INPUT
-        (60.0, 0.0, 0.3, 1.5, 0.2),    # field out of range: INVALID
-    ]
+    designs = _CHECKED_RANGE_DESIGNS
     w020, w040, w131, field, u = (np.array(x) for x in zip(*designs, strict=True))
     ab = jj.Seidel(w020=w020, w040=w040, w131=w131)
     peak = float(SIGNAL(jnp.zeros(()), jnp.zeros(())))
@@ -593,3 +596,50 @@ def test_sweep_jmse_marks_the_designs_beyond_the_checked_range(monkeypatch, tmp_
     plain = jj.sweep(lambda x: x ** 2, np.arange(3.0), progress=False)
     assert plain.beyond_checked is None and plain.in_checked_range.tolist() == [True] * 3
     assert jj.SweepResult.load(plain.save(tmp_path / "plain")).beyond_checked is None
+
+
+@pytest.mark.parametrize("preset", ["fast", "default"])
+def test_beyond_checked_answers_as_a_concrete_jmse_call_warns(monkeypatch, preset):
+    """``jj.beyond_checked``: for one design, True exactly where a concrete ``jmse`` call on
+    it warns (the oracle, ``_eager_warns``), for each in-range design of
+    ``_CHECKED_RANGE_DESIGNS`` at two noise levels and a Zernike design; for the batch, the
+    same per design, False for the designs ``jmse`` refuses. The default has the balanced
+    grid, so the cancelling design is inside its range (beyond 'fast''s)."""
+    w020, w040, w131, field, u = (np.array(x) for x in zip(*_CHECKED_RANGE_DESIGNS,
+                                                            strict=True))
+    low = jj.WhiteNoise(float(SIGNAL(jnp.zeros(()), jnp.zeros(()))) / 1e7)
+    for noise in (NOISE, low):
+        batch = jj.beyond_checked(jj.Seidel(w020=w020, w040=w040, w131=w131), field, u,
+                                  SIGNAL, noise, preset=preset)
+        expected = []
+        for i in range(len(_CHECKED_RANGE_DESIGNS)):
+            design = jj.Seidel(w020=w020[i], w040=w040[i], w131=w131[i])
+            if not (np.isfinite(w020[i]) and 0.0 <= field[i] <= 1.0):
+                expected.append(False)
+                with pytest.raises(ValueError, match="must be finite|field must be in"):
+                    jj.beyond_checked(design, field[i], u[i], SIGNAL, noise, preset=preset)
+                continue
+            one = jj.beyond_checked(design, float(field[i]), float(u[i]), SIGNAL, noise,
+                                    preset=preset)
+            assert isinstance(one, bool)
+            assert one == _eager_warns(monkeypatch, design, field[i], u[i], SIGNAL, noise,
+                                       preset=preset), (i, noise)
+            expected.append(one)
+        assert batch.tolist() == expected
+        assert expected[:5] == ([False, True, True, preset == "fast", False] if noise is NOISE
+                                else [True, True, True, True, False])
+    zernike = jj.Zernike([60.0, 0.3], noll=(4, 7))
+    assert jj.beyond_checked(zernike, 0.5, 0.2, SIGNAL, NOISE, preset=preset) == _eager_warns(
+        monkeypatch, zernike, 0.5, 0.2, SIGNAL, NOISE, preset=preset) is True
+
+
+def test_beyond_checked_refuses_what_has_no_checked_range():
+    design = jj.Seidel(w020=1.0)
+    with pytest.raises(ValueError, match=r"grid options \(nodes\) have no checked range"):
+        jj.beyond_checked(design, 0.5, 0.2, SIGNAL, NOISE, nodes=(8, 8))
+    with pytest.raises(ValueError, match="preset must be one of"):
+        jj.beyond_checked(design, 0.5, 0.2, SIGNAL, NOISE, preset="bogus")
+    with pytest.raises(ValueError, match=r"u must be in \(0.0, 1.5\], got 0.0"):
+        jj.beyond_checked(design, 0.5, 0.0, SIGNAL, NOISE)
+    with pytest.raises(TypeError, match="beyond_checked needs concrete values"):
+        jax.jit(lambda w: jj.beyond_checked(jj.Seidel(w020=w), 0.5, 0.2, SIGNAL, NOISE))(1.0)
