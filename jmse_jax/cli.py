@@ -372,6 +372,8 @@ def evaluate(settings: dict) -> dict:
         inputs=dict(inputs, **{k: settings[k] for k in ("field", "u", "noise", "signal",
                                                          "preset")}),
         jmse=float(value),
+        # The design beyond what the preset was checked at (the warning's condition).
+        beyond_checked=bool(jj.beyond_checked(ab, field, u, signal, noise, preset=preset)),
         gradient=gradient,
         otf=[dict(nu=float(n), nu_x=dict(re=float(a.real), im=float(a.imag), mtf=float(abs(a))),
                   nu_y=dict(re=float(b.real), im=float(b.imag), mtf=float(abs(b))))
@@ -411,7 +413,8 @@ def _cmd_eval(args) -> int:
         for k in COEFFICIENTS:
             print(f"{k + ' (' + COEFFICIENT_NAMES[k] + ')':<26}{inp[k]:>15.6g}"
                   f"{result['gradient'][k]:>20.6e}")
-    print(f"JMSE = {result['jmse']:.10e}")
+    caveat = " (beyond the checked range: see the warning)" if result["beyond_checked"] else ""
+    print(f"JMSE = {result['jmse']:.10e}{caveat}")
     print("OTF H (nu in cutoff units 1/(lambda N)):")
     print(f"{'nu':>8}{'H(nu, 0)':>28}{'|H(nu,0)|':>12}{'H(0, nu)':>28}{'|H(0,nu)|':>12}")
     for row in result["otf"]:

@@ -509,6 +509,20 @@ def test_report_warnings_labels_only_the_librarys_own(capsys):
 # --------------------------------------------------------------------------------------
 
 
+def test_eval_says_when_its_design_is_beyond_the_checked_range(capsys, tmp_path):
+    """A design whose wavefront slope is beyond CHECKED_SLOPE (the oracle: the slope
+    warning jmse gives it, on stderr): the JMSE line's caveat, and ``beyond_checked`` in the
+    JSON, for scripts that read it rather than stderr."""
+    out_json = tmp_path / "eval.json"
+    status, out, err = run_cli(capsys, "eval", "--w020", "40", "--w131", "0.5", "--field",
+                               "0.5", "--u", "0.2", "--preset", "fast", "--nu", "0.1",
+                               "--out-json", str(out_json))
+    assert status == 0
+    assert warnings_of(err)[0].startswith("jmse-jax: warning: the wavefront slope")
+    assert "(beyond the checked range: see the warning)" in out
+    assert json.loads(out_json.read_text())["beyond_checked"] is True
+
+
 def test_eval_matches_library(capsys, tmp_path):
     out_json = tmp_path / "eval.json"
     status, out, err = run_cli(capsys, "eval", *FIG1_FLAGS, "--field", "0.95", "--u", "0.2",
@@ -523,6 +537,7 @@ def test_eval_matches_library(capsys, tmp_path):
     expected = float(value)
     assert result["jmse"] == pytest.approx(expected, rel=1e-12)
     assert f"{expected:.10e}" in out
+    assert result["beyond_checked"] is False and "beyond the checked range" not in out
     assert list(result["gradient"]) == list(cli.COEFFICIENTS)
     for k in cli.COEFFICIENTS:
         assert result["gradient"][k] == pytest.approx(float(getattr(grad, k)), rel=1e-10,
