@@ -51,18 +51,12 @@ from ._merit import (
     _slope_message,
     _snr_peaks,
     _strength_message,
+    _validate,
     _warn_beyond_checked_snr,
     jmse,
     jmse_options,
 )
-from ._numerics import (
-    AccuracyWarning,
-    all_finite,
-    check_count,
-    check_finite_tree,
-    check_range,
-    is_concrete,
-)
+from ._numerics import AccuracyWarning, all_finite, check_count, is_concrete
 
 __all__ = ["SweepResult", "SweepStatus", "beyond_checked", "hypercube", "sweep", "sweep_jmse"]
 
@@ -965,8 +959,8 @@ def beyond_checked(aberrations, field, u, signal, noise, *, preset: str = "defau
     -------
     bool for one design (``field`` and ``u`` scalars, the aberrations one design's), else
     ndarray of bool, shape (n,). In a batch, designs that ``jmse`` refuses (not finite,
-    ``field`` outside [0, 1], ``u`` outside (0, 1.5]) are False; one such design alone
-    raises ``ValueError``, as ``jmse`` does.
+    ``field`` outside [0, 1], ``u`` outside (0, 1.5]) are False; one design alone is
+    checked as ``jmse`` checks it, with its errors.
 
     Examples
     --------
@@ -990,9 +984,7 @@ def beyond_checked(aberrations, field, u, signal, noise, *, preset: str = "defau
     single = (np.ndim(field) == 0 and np.ndim(u) == 0
               and all(np.ndim(x) <= one for x in jax.tree_util.tree_leaves(aberrations)))
     if single:
-        check_finite_tree("aberrations", aberrations)
-        check_range("field", field, 0.0, 1.0)
-        check_range("u", u, 0.0, U_MAX, low_inclusive=False)
+        _validate(aberrations, field, u, signal, noise)  # jmse's own checks and errors
         aberrations, field, u = jax.tree_util.tree_map(
             lambda x: np.asarray(x)[None], (aberrations, field, u))
     mask = warn_like_jmse(aberrations, field, u, signal, noise, dict(options, preset=preset),
