@@ -53,6 +53,7 @@ from ._merit import (
 from ._numerics import AccuracyWarning as AccuracyWarning
 from ._optimise import (
     OptimisationResult as OptimisationResult,
+    lens_beyond_checked as lens_beyond_checked,
     lens_merit as lens_merit,
     optimise as optimise,
 )

@@ -293,6 +293,89 @@ def _status_jit(lens, wavelength=None):
     return _status(lens, paraxial_trace(lens, wavelength))
 
 
+def lens_beyond_checked(
+    lens: Lens,
+    *,
+    u=0.2,
+    signal: AbstractSignal | None = None,
+    noise: AbstractNoise | None = None,
+    fields=(0.0, 0.7, 1.0),
+    wavelengths=None,
+    reference_scale=None,
+    jmse_options: dict | None = None,
+) -> np.ndarray:
+    """Per field, whether the designs ``lens_merit`` hands to ``jmse`` lie beyond what the
+    preset's grids were checked at (``beyond_checked``): the lens's Seidel waves at that
+    field and wavelength, the band ``u`` and the spectra referred to the wavelength's
+    ``lambda N``, as ``lens_merit`` passes them. For an optimiser's loop or a notebook that
+    wants to know, as a value, whether the JMSE of a design is held to the preset's
+    accuracy (``jmse``'s ``AccuracyWarning`` says the same at run time).
+
+    Parameters
+    ----------
+    lens : Lens, concrete and physical at every wavelength (else ``ValueError``)
+    u, signal, noise, fields, wavelengths, reference_scale, jmse_options
+        As in ``lens_merit`` (``jmse_options`` default: the default preset). Grid options
+        (``nodes``, ``se_nodes``, ...) have no checked range and are refused.
+
+    Returns
+    -------
+    ndarray of bool, shape ``(len(fields),)``: True where the design at that field is
+    beyond the checked range at any of the wavelengths.
+    """
+    if not isinstance(lens, Lens):
+        raise TypeError(f"lens must be a jmse_jax.lens.Lens, got {type(lens)}")
+    if not is_concrete((lens, u, signal, noise, fields, wavelengths, reference_scale)):
+        raise TypeError("lens_beyond_checked needs concrete values, got traced ones (under "
+                        "jit, vmap or grad jmse checks its designs when the program runs)")
+    dtype = lens.ep_radius.dtype
+    fields, _, wavelengths = _check_merit_arguments(
+        dtype, u, signal, noise, fields, None, wavelengths, jmse_options, warn=False)
+    given = [name for name in _GRID_OPTIONS if (jmse_options or {}).get(name) is not None]
+    if given:
+        raise ValueError(f"lens_beyond_checked: grid options ({', '.join(given)}) have no "
+                         f"checked range; the bounds are those of the presets' own grids")
+    _check_lens_at(lens, wavelengths)
+    if reference_scale is not None:
+        check_range("reference_scale", reference_scale, 0.0, None, low_inclusive=False)
+    options = _with_gradient_counts(dict(jmse_options or {}), u, signal, noise,
+                                    prefix="grad_")
+    return _lens_beyond(lens, u, signal, noise, fields, wavelengths, reference_scale, options)
+
+
+def _lens_beyond(lens, u, signal, noise, fields, wavelengths, reference_scale, options):
+    """``lens_beyond_checked`` on checked arguments (a concrete, physical ``lens``; the
+    options ``lens_merit`` or ``optimise`` pass to ``jmse``, without grid options)."""
+    from ._sweep import beyond_checked  # _sweep imports the merit; this module is imported first
+
+    signal = MarkovSignal(1.0, 5.0) if signal is None else signal
+    noise = WhiteNoise(1e-3) if noise is None else noise
+    options = dict(options)
+    preset = options.pop("preset", "default")
+    fields = np.asarray(fields, float)
+    reference = paraxial_trace(lens)
+    own_reference = reference_scale is None
+    if own_reference:
+        reference_scale = lens.wavelength * _f_number_of(reference)
+    monochromatic = wavelengths is None
+    beyond = np.zeros(fields.shape, bool)
+    for wl in [lens.wavelength] if monochromatic else list(wavelengths):
+        # The designs of _merit_table: the waves at this wavelength, the band and the
+        # spectra referred to its lambda N.
+        trace = reference if monochromatic else paraxial_trace(lens, wl)
+        aberrations = _waves_from_traces(lens, trace, reference, wl)
+        if monochromatic and own_reference:
+            scale = jnp.ones((), lens.ep_radius.dtype)
+        else:
+            scale = jnp.asarray(wl * _f_number_of(trace) / reference_scale,
+                                lens.ep_radius.dtype)
+        batch = jax.tree_util.tree_map(lambda a: np.full(fields.shape, float(a)), aberrations)
+        beyond |= beyond_checked(batch, fields, np.full(fields.shape, float(u * scale)),
+                                 _RescaledSignal(signal, scale), _RescaledNoise(noise, scale),
+                                 preset=preset, **options)
+    return beyond
+
+
 def _check_lens_at(lens, wavelengths):
     """Raise ``ValueError`` when the concrete ``lens`` is non-physical at its reference
     wavelength or at any of ``wavelengths`` (None: the reference only), naming the
@@ -560,6 +643,11 @@ class OptimisationResult:
     jmse_options : dict, the keyword options of ``jmse`` the run used (``{"preset":
         "fast"}`` unless ``optimise`` was given others): confirm a ``"fast"`` optimum with
         the default (``lens_merit`` without ``jmse_options``)
+    beyond_checked : tuple of bool, one per field, or None: whether ``lens``'s design at
+        that field (at any wavelength) lies beyond what the preset's grids were checked at
+        (``lens_beyond_checked`` with the run's arguments), so that ``jmse`` and
+        ``jmse_per_field`` there are not held to the preset's accuracy; None where nothing
+        was checked (grid options in ``jmse_options``, or a non-physical final design)
     """
 
     solution: object
@@ -580,6 +668,7 @@ class OptimisationResult:
     fields: tuple
     reference_scale: float
     jmse_options: dict = dataclasses.field(default_factory=dict)
+    beyond_checked: tuple | None = None
 
     def summary(self) -> str:
         """A readable multi-line report of the optimised design."""
@@ -593,9 +682,10 @@ class OptimisationResult:
         for name in ("curvatures", "thicknesses"):
             values = np.array2string(np.asarray(getattr(self.lens, name)), precision=6)
             lines.append(f"  {name:<18s} = {values}")
-        per_field = ", ".join(f"h={h:g}: {v:.6e}" for h, v in zip(self.fields,
-                                                                   self.jmse_per_field,
-                                                                   strict=True))
+        beyond = self.beyond_checked or (False,) * len(self.fields)
+        per_field = ", ".join(f"h={h:g}: {v:.6e}" + (" (beyond the checked range)" if b else "")
+                              for h, v, b in zip(self.fields, self.jmse_per_field, beyond,
+                                                 strict=True))
         lines.append(f"  JMSE (mean)        = {self.jmse:.8e}   [{per_field}]"
                      f"   (start {self.start_jmse:.6e})")
         lines.append(f"  RMS wavefront      = {self.rms_wavefront:.6f} waves (RMS over fields;"
@@ -805,10 +895,16 @@ def optimise(
         variance = float(np.sum(weights * np.asarray(variances)) / np.sum(weights))
         return per_field, mean_jmse, variance, True
 
+    jmse_items_dict = dict(jmse_items)
     per_field, mean_jmse, variance, final_ok = report(final)
     _, start_jmse, start_variance, _ = report(lens)
     if not final_ok:
         result += "; the final design is non-physical (lens_status(result.lens).ok is False)"
+    beyond = None
+    if final_ok and all(jmse_items_dict.get(name) is None for name in _GRID_OPTIONS):
+        beyond = tuple(bool(b) for b in _lens_beyond(
+            final, problem.u, signal, noise, fields, wavelengths, problem.reference_scale,
+            jmse_items_dict))
     value = mean_jmse if merit == "jmse" else variance
     return OptimisationResult(
         solution=solution, lens=final, start=lens, parameters=parameters, merit=merit,
@@ -818,5 +914,5 @@ def optimise(
         wall_time=wall_time, result=result, solver=solver_name,
         fields=tuple(float(f) for f in np.asarray(fields)),
         reference_scale=float(problem.reference_scale),
-        jmse_options=dict(jmse_items),
+        jmse_options=dict(jmse_items), beyond_checked=beyond,
     )

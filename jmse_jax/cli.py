@@ -500,8 +500,15 @@ def _cmd_optimise(args) -> int:
             start_jmse=result.start_jmse, start_rms_wavefront_waves=result.start_rms_wavefront,
             curvatures_per_mm=[float(c) for c in result.lens.curvatures],
             iterations=result.iterations, wall_time_s=result.wall_time, result=result.result,
-            solver=result.solver))
+            solver=result.solver,
+            # per field: the result's JMSE beyond the preset's checked range (None: unchecked)
+            beyond_checked=_optional_list(getattr(result, "beyond_checked", None))))
     return 0
+
+
+def _optional_list(values):
+    """``list(values)``, or None for None."""
+    return None if values is None else list(values)
 
 
 # --------------------------------------------------------------------------------------

@@ -405,7 +405,8 @@ def test_optimise_reports_the_stop_distance_as_its_flag_takes_it(capsys, tmp_pat
             summary=lambda: "optimise: (stand-in)\n  stop_position      = -1.186",
             merit="jmse", parameters=parameters, value=1e-3, jmse=1e-3, jmse_per_field=[1e-3],
             fields=[0.0], rms_wavefront=0.1, start_jmse=2e-3, start_rms_wavefront=0.2,
-            lens=lens, iterations=3, wall_time=0.1, result="successful", solver="bfgs")
+            lens=lens, iterations=3, wall_time=0.1, result="successful", solver="bfgs",
+            beyond_checked=(True,))
 
     monkeypatch.setattr(jj, "optimise", fake_optimise)
     out_json = tmp_path / "opt.json"
@@ -417,6 +418,7 @@ def test_optimise_reports_the_stop_distance_as_its_flag_takes_it(capsys, tmp_pat
     assert result["final"]["image_shift_mm"] == pytest.approx(0.01)
     assert result["parameters"]["stop_position"] == pytest.approx(-1.186)
     assert "stop_position" in result["parameters_convention"]
+    assert result["beyond_checked"] == [True]  # the result's per-field flags, passed on
 
 
 def _stand_in_result(lens, image_shift, rms_wavefront):

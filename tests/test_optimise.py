@@ -1,5 +1,6 @@
 """Lens optimisation: gradients vs finite differences, JMSE vs RMS optima, bounds, solvers."""
 
+import dataclasses
 import math
 
 import equinox as eqx
@@ -10,6 +11,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from checked_range import eager_warns  # noqa: E402
 from small_tiers import SMALL_TIERS, tiers_without_one_ray  # noqa: E402
 
 import jmse_jax  # noqa: E402
@@ -18,7 +20,16 @@ from jmse_jax import (  # noqa: E402
     lens as jl,
 )
 from jmse_jax._merit import _route  # noqa: E402
-from jmse_jax._optimise import _get, _parse, _set, lens_merit, optimise  # noqa: E402
+from jmse_jax._optimise import (  # noqa: E402
+    _get,
+    _parse,
+    _RescaledNoise,
+    _RescaledSignal,
+    _set,
+    lens_beyond_checked,
+    lens_merit,
+    optimise,
+)
 
 FAST = {"preset": "fast"}
 VARIABLES = ("curvatures[0]", "stop_position", "image_shift")
@@ -180,6 +191,107 @@ def test_polychromatic_merit_rescales_band_and_spectra():
                             jmse_options=FAST))
     assert same == pytest.approx(mono, rel=1e-12)
     assert abs(got - mono) > 1e-3 * mono
+
+
+def _dispersion_free(image_shift):
+    """A singlet of constant index 1.5168 (its F-number the same at every wavelength), 20
+    degrees of field, focused ``image_shift`` mm off."""
+    return jl.Singlet(0.04, -0.17, 1.5, 1.5168, stop_distance=1.0, f_number=4.6,
+                      field_angle=20.0, image_shift=image_shift)
+
+
+def _lens_oracle(monkeypatch, lens, u, noise, fields, wavelengths, options):
+    """Per field, whether a concrete ``jmse`` call warns on a design ``lens_merit`` gives it
+    at any of the wavelengths: the lens's Seidel waves there, ``u s`` and the spectra
+    ``S(nu / s) / s²`` with ``s = lambda / lambda_0`` (constant index: ``lambda N`` scales
+    with ``lambda`` alone). The spectra are ``lens_merit``'s own rescaled models: its noise
+    model does not say it is isotropic, so on the axis ``jmse`` takes the polar grid (and
+    its checks, e.g. of terms that cancel) rather than the one-ray plans that a plain
+    ``WhiteNoise`` gets."""
+    reference = float(lens.wavelength)
+
+    def warns(wl, h):
+        s = jnp.asarray(wl / reference)
+        return eager_warns(monkeypatch, jl.seidel_waves(lens, wl), h, u * wl / reference,
+                           _RescaledSignal(jmse_jax.MarkovSignal(1.0, 5.0), s),
+                           _RescaledNoise(jmse_jax.WhiteNoise(noise), s), **options)
+
+    return np.array([any(warns(wl, h) for wl in (wavelengths or (reference,)))
+                     for h in fields])
+
+
+def test_lens_beyond_checked_answers_as_concrete_jmse_calls_warn(monkeypatch):
+    """``lens_beyond_checked`` marks the fields at which ``jmse`` would warn on the design
+    ``lens_merit`` hands it (the oracle: concrete calls on the lens's Seidel waves with the
+    band and spectra rescaled by hand), for designs beyond the checked strength and slope
+    at some fields only, terms that cancel for ``fast`` (the default has the balanced
+    grid), a peak ``S_x / S_n`` beyond ``CHECKED_SNR`` (off the axis only) and inside,
+    with one wavelength and with two."""
+    fields = (0.0, 0.5, 1.0)
+    peak = float(jmse_jax.MarkovSignal(1.0, 5.0)(jnp.zeros(()), jnp.zeros(())))
+    cases = [  # image_shift, u, noise, jmse_options, wavelengths
+        (1.5, 0.4, 1e-3, {}, None),
+        (1.5, 0.4, 1e-3, {}, (0.486, 0.656)),
+        (0.7, 0.4, 1e-3, FAST, (0.486, 0.656)),
+        (-0.5, 0.4, 1e-3, FAST, None),
+        (-0.5, 0.4, 1e-3, {}, None),
+        (0.0, 0.2, peak / 1e7, {}, (0.486, 0.656)),
+        (0.0, 0.2, 1e-3, {}, None),
+    ]
+    seen = set()
+    for shift, u, noise, options, wavelengths in cases:
+        lens = _dispersion_free(shift)
+        got = lens_beyond_checked(lens, u=u, noise=jmse_jax.WhiteNoise(noise), fields=fields,
+                                  wavelengths=wavelengths, jmse_options=options)
+        expected = _lens_oracle(monkeypatch, lens, u, noise, fields, wavelengths, options)
+        assert got.dtype == bool and got.shape == (3,)
+        np.testing.assert_array_equal(got, expected, err_msg=str((shift, u, noise, options)))
+        seen.add(tuple(expected))
+    # Not vacuous: mixed answers across the fields, all False and all True among the cases.
+    assert (False, False, False) in seen and (False, True, True) in seen
+    assert (True, True, False) in seen and (False, True, True) in seen
+    assert (False, False, True) in seen
+
+
+def test_lens_beyond_checked_refuses_what_it_cannot_answer():
+    """Grid options (no checked range), traced values, a non-physical lens, a field or
+    ``u`` out of range: clear errors naming what is wrong."""
+    lens = _dispersion_free(0.0)
+    with pytest.raises(ValueError, match=r"grid options \(nodes\) have no checked range"):
+        lens_beyond_checked(lens, jmse_options={"nodes": (24, 16)})
+    with pytest.raises(TypeError, match="needs concrete values"):
+        jax.jit(lambda u: lens_beyond_checked(lens, u=u))(0.2)
+    with pytest.raises(ValueError, match=r"fields .*\[0\.0, 1\.0\]"):
+        lens_beyond_checked(lens, fields=(0.5, 1.2))
+    with pytest.raises(ValueError, match=r"u must be in \(0\.0, 1\.5\]"):
+        lens_beyond_checked(lens, u=0.0)
+    with pytest.raises(TypeError, match="lens must be a jmse_jax.lens.Lens"):
+        lens_beyond_checked(jmse_jax.Seidel(w020=1.0))
+    flat = jl.Singlet(0.0, 0.0, 1.5, 1.5168, stop_distance=1.0, ep_radius=1.0,
+                      field_angle=20.0)  # no power: no focus
+    with pytest.raises(ValueError):
+        lens_beyond_checked(flat)
+
+
+def test_optimisation_result_says_which_fields_are_beyond_the_checked_range(monkeypatch,
+                                                                           jmse_optimum):
+    """``OptimisationResult.beyond_checked``: per field, whether ``jmse`` would warn on the
+    final design (the oracle of ``lens_beyond_checked``'s test), shown in the summary; all
+    False at the paper singlet's optimum. A run held far from focus (one variable, two
+    steps) ends beyond the checked strength at the outer fields."""
+    assert jmse_optimum.beyond_checked == (False, False, False)
+    assert "beyond" not in jmse_optimum.summary()
+    far = optimise(_dispersion_free(1.5), ("stop_position",), merit="rms", u=0.4,
+                   max_steps=2, jmse_options=FAST)
+    # The stop moves no focal length: u and the spectra refer to the final design's own
+    # lambda N, as the oracle takes them.
+    assert far.reference_scale == pytest.approx(
+        float(far.lens.wavelength * jl.working_f_number(far.lens)), rel=1e-12)
+    expected = _lens_oracle(monkeypatch, far.lens, 0.4, 1e-3, far.fields, None, FAST)
+    assert far.beyond_checked == tuple(expected) == (False, True, True)
+    assert far.summary().count("(beyond the checked range)") == 2
+    # Grid options have no checked range: nothing is said.
+    assert dataclasses.replace(far, beyond_checked=None).summary().count("beyond") == 0
 
 
 def test_polychromatic_optimise_reaches_a_minimum_of_its_merit(rms_optimum):

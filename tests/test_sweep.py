@@ -22,6 +22,7 @@ from jmse_jax import AccuracyWarning, SweepStatus  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+from checked_range import eager_warns  # noqa: E402
 from sweep_devices_worker import CHEAP, designs  # noqa: E402
 
 SIGNAL, NOISE = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
@@ -529,27 +530,6 @@ def test_sweep_jmse_gives_the_eager_calls_warnings(monkeypatch):
         assert _sweep_warnings(monkeypatch, ab, field, 0.2, SIGNAL, NOISE, preset="fast") == []
 
 
-def _eager_warns(monkeypatch, aberrations, field, u, signal, noise, **options) -> bool:
-    """Whether a concrete ``jmse`` call on one design gives an ``AccuracyWarning``: the
-    oracle of ``beyond_checked``. Its computation, which comes after its checks, is replaced
-    by a stand-in that stops the call (``_merit._eager_tier_choice``)."""
-    import jmse_jax._merit as merit
-
-    class Stop(Exception):
-        pass
-
-    def stop(*args, **kwargs):
-        raise Stop
-
-    with monkeypatch.context() as patch:
-        patch.setattr(merit, "_eager_tier_choice", stop)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            with pytest.raises(Stop):
-                jj.jmse(aberrations, field, u, signal, noise, **options)
-    return any(issubclass(w.category, AccuracyWarning) for w in caught)
-
-
 _CHECKED_RANGE_DESIGNS = [  # (w020, w040, w131, field, u)
     (1.0, 0.0, 0.3, 0.5, 0.2),     # inside
     (40.0, 0.0, 0.5, 0.5, 0.2),    # slope beyond CHECKED_SLOPE, strength inside
@@ -563,11 +543,12 @@ _CHECKED_RANGE_DESIGNS = [  # (w020, w040, w131, field, u)
 
 def test_sweep_jmse_marks_the_designs_beyond_the_checked_range(monkeypatch, tmp_path):
     """``SweepResult.beyond_checked``: per design, whether a concrete ``jmse`` call on it
-    warns (the oracle, ``_eager_warns``), for designs beyond the checked strength, slope
-    and cancellation and inside it, on and off the axis, at a noise whose peak ratio is
-    between ``CHECKED_SNR`` and ``CHECKED_SNR_PEAKS`` (beyond for designs off the axis only:
-    on it the one-ray plans integrate the peaks in closed form); False for designs whose
-    status is not OK; kept by ``save`` / ``load``; None with grid options."""
+    warns (the oracle, ``checked_range.eager_warns``), for designs beyond the checked
+    strength, slope and cancellation and inside it, on and off the axis, at a noise whose
+    peak ratio is between ``CHECKED_SNR`` and ``CHECKED_SNR_PEAKS`` (beyond for designs
+    off the axis only: on it the one-ray plans integrate the peaks in closed form); False
+    for designs whose status is not OK; kept by ``save`` / ``load``; None with grid
+    options."""
     designs = _CHECKED_RANGE_DESIGNS
     w020, w040, w131, field, u = (np.array(x) for x in zip(*designs, strict=True))
     ab = jj.Seidel(w020=w020, w040=w040, w131=w131)
@@ -578,7 +559,7 @@ def test_sweep_jmse_marks_the_designs_beyond_the_checked_range(monkeypatch, tmp_
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", AccuracyWarning)
             result = jj.sweep_jmse(ab, field, u, SIGNAL, noise, preset="fast", progress=False)
-        expected = [bool(result.ok[i]) and _eager_warns(
+        expected = [bool(result.ok[i]) and eager_warns(
             monkeypatch, jj.Seidel(w020=w020[i], w040=w040[i], w131=w131[i]), field[i],
             u[i], SIGNAL, noise, preset="fast") for i in range(len(designs))]
         assert result.beyond_checked.tolist() == expected
@@ -601,7 +582,7 @@ def test_sweep_jmse_marks_the_designs_beyond_the_checked_range(monkeypatch, tmp_
 @pytest.mark.parametrize("preset", ["fast", "default"])
 def test_beyond_checked_answers_as_a_concrete_jmse_call_warns(monkeypatch, preset):
     """``jj.beyond_checked``: for one design, True exactly where a concrete ``jmse`` call on
-    it warns (the oracle, ``_eager_warns``), for each in-range design of
+    it warns (the oracle, ``checked_range.eager_warns``), for each in-range design of
     ``_CHECKED_RANGE_DESIGNS`` at two noise levels and a Zernike design; for the batch, the
     same per design, False for the designs ``jmse`` refuses. The default has the balanced
     grid, so the cancelling design is inside its range (beyond 'fast''s)."""
@@ -622,14 +603,14 @@ def test_beyond_checked_answers_as_a_concrete_jmse_call_warns(monkeypatch, prese
             one = jj.beyond_checked(design, float(field[i]), float(u[i]), SIGNAL, noise,
                                     preset=preset)
             assert isinstance(one, bool)
-            assert one == _eager_warns(monkeypatch, design, field[i], u[i], SIGNAL, noise,
+            assert one == eager_warns(monkeypatch, design, field[i], u[i], SIGNAL, noise,
                                        preset=preset), (i, noise)
             expected.append(one)
         assert batch.tolist() == expected
         assert expected[:5] == ([False, True, True, preset == "fast", False] if noise is NOISE
                                 else [True, True, True, True, False])
     zernike = jj.Zernike([60.0, 0.3], noll=(4, 7))
-    assert jj.beyond_checked(zernike, 0.5, 0.2, SIGNAL, NOISE, preset=preset) == _eager_warns(
+    assert jj.beyond_checked(zernike, 0.5, 0.2, SIGNAL, NOISE, preset=preset) == eager_warns(
         monkeypatch, zernike, 0.5, 0.2, SIGNAL, NOISE, preset=preset) is True
 
 
