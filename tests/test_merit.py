@@ -1000,6 +1000,11 @@ def test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes():
             == jj.BALANCED_GRID["nodes"])
 
 
+# Slow (session 108: 36 s at level 0 in the suite, which had grown back past its 15
+# minutes): the count it guards, DEGREE_NODES, is asserted in the plan by
+# test_high_balanced_plan_beyond_seidel_degree_has_the_degree_nodes, and the balanced plan of
+# Zernike programs keeps value checks here ("overlap" below and the Z28 test above).
+@pytest.mark.slow
 def test_default_balanced_plan_beyond_seidel_degree_holds_quadrafoil():
     """A Noll 4-22 design with 0.57 and 0.27 waves of quadrafoil (``Z14``, ``Z15``) among
     its terms, at u = 0.29 (strength 23, slope 56: the balanced plan), found by session
