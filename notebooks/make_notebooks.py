@@ -139,6 +139,14 @@ for name, lens in (("start", start), ("optimum", result.lens)):
 fields = np.asarray(result.fields)
 plt.plot(fields, result.jmse_per_field, "o-", label="JMSE-optimal")
 plt.xlabel("field"); plt.ylabel("JMSE"); plt.legend(); plt.show()"""),
+        ("md", """\
+Whether the optimum's JMSE at each field is held to the preset's accuracy:
+`result.beyond_checked` is True at a field whose design lies beyond what the preset was
+checked at (the summary flags it). `lens_beyond_checked` asks the same of any lens, here the
+start focused 5 mm off (about 50 waves of defocus):"""),
+        ("code", """\
+far = jl.paper_singlet(1.0, 0.05, image_shift=5.0)
+result.beyond_checked, jj.lens_beyond_checked(far, jmse_options={"preset": "fast"})"""),
     ],
     "sweeps": [
         ("md", """\
