@@ -36,6 +36,7 @@ from ._merit import (
 )
 from ._numerics import all_finite, check_choice, check_count, check_range, is_concrete
 from ._spectra import AbstractNoise, AbstractSignal, MarkovSignal, WhiteNoise
+from ._sweep import beyond_checked
 from .lens import (
     Lens,
     paraxial_trace,
@@ -45,7 +46,8 @@ from .lens import (
 from .lens._paraxial import _raise_for, _status
 from .lens._seidel import _waves_from_traces
 
-__all__ = ["MERITS", "SOLVERS", "OptimisationResult", "lens_merit", "optimise"]
+__all__ = ["MERITS", "SOLVERS", "OptimisationResult", "lens_beyond_checked", "lens_merit",
+           "optimise"]
 
 #: Names accepted by ``lens_merit`` / ``optimise`` for ``merit``.
 MERITS = ("jmse", "rms")
@@ -346,8 +348,6 @@ def lens_beyond_checked(
 def _lens_beyond(lens, u, signal, noise, fields, wavelengths, reference_scale, options):
     """``lens_beyond_checked`` on checked arguments (a concrete, physical ``lens``; the
     options ``lens_merit`` or ``optimise`` pass to ``jmse``, without grid options)."""
-    from ._sweep import beyond_checked  # _sweep imports the merit; this module is imported first
-
     signal = MarkovSignal(1.0, 5.0) if signal is None else signal
     noise = WhiteNoise(1e-3) if noise is None else noise
     options = dict(options)

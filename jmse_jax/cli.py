@@ -502,7 +502,7 @@ def _cmd_optimise(args) -> int:
             iterations=result.iterations, wall_time_s=result.wall_time, result=result.result,
             solver=result.solver,
             # per field: the result's JMSE beyond the preset's checked range (None: unchecked)
-            beyond_checked=_optional_list(getattr(result, "beyond_checked", None))))
+            beyond_checked=_optional_list(result.beyond_checked)))
     return 0
 
 

@@ -427,7 +427,8 @@ def _stand_in_result(lens, image_shift, rms_wavefront):
         summary=lambda: "optimise: (stand-in)", merit="jmse",
         parameters={"image_shift": image_shift}, value=1e-2, jmse=1e-2, jmse_per_field=[1e-2],
         fields=[0.0], rms_wavefront=rms_wavefront, start_jmse=1e-2, start_rms_wavefront=0.1,
-        lens=lens, iterations=1, wall_time=0.1, result="successful", solver="bfgs")
+        lens=lens, iterations=1, wall_time=0.1, result="successful", solver="bfgs",
+        beyond_checked=None)
 
 
 def test_optimise_warns_as_jmse_does_for_designs_beyond_the_checked_strength(capsys,
