@@ -345,34 +345,40 @@ def lens_beyond_checked(
     return _lens_beyond(lens, u, signal, noise, fields, wavelengths, reference_scale, options)
 
 
-def _lens_beyond(lens, u, signal, noise, fields, wavelengths, reference_scale, options):
-    """``lens_beyond_checked`` on checked arguments (a concrete, physical ``lens``; the
-    options ``lens_merit`` or ``optimise`` pass to ``jmse``, without grid options)."""
+def _lens_designs(lens, u, signal, noise, fields, wavelengths, reference_scale):
+    """The designs ``lens_merit`` hands to ``jmse`` (``_merit_table``), one batch per
+    wavelength: ``(aberrations, fields, band, signal, noise)``, the aberrations' leaves and
+    the band of shape ``fields.shape``, the spectra referred to the wavelength's
+    ``lambda N``. For a concrete, physical ``lens``; ``reference_scale`` None: its own."""
     signal = MarkovSignal(1.0, 5.0) if signal is None else signal
     noise = WhiteNoise(1e-3) if noise is None else noise
-    options = dict(options)
-    preset = options.pop("preset", "default")
     fields = np.asarray(fields, float)
+    dtype = lens.ep_radius.dtype
     reference = paraxial_trace(lens)
     own_reference = reference_scale is None
     if own_reference:
         reference_scale = lens.wavelength * _f_number_of(reference)
     monochromatic = wavelengths is None
-    beyond = np.zeros(fields.shape, bool)
     for wl in [lens.wavelength] if monochromatic else list(wavelengths):
-        # The designs of _merit_table: the waves at this wavelength, the band and the
-        # spectra referred to its lambda N.
         trace = reference if monochromatic else paraxial_trace(lens, wl)
         aberrations = _waves_from_traces(lens, trace, reference, wl)
         if monochromatic and own_reference:
-            scale = jnp.ones((), lens.ep_radius.dtype)
+            scale = jnp.ones((), dtype)
         else:
-            scale = jnp.asarray(wl * _f_number_of(trace) / reference_scale,
-                                lens.ep_radius.dtype)
-        batch = jax.tree_util.tree_map(lambda a: np.full(fields.shape, float(a)), aberrations)
-        beyond |= beyond_checked(batch, fields, np.full(fields.shape, float(u * scale)),
-                                 _RescaledSignal(signal, scale), _RescaledNoise(noise, scale),
-                                 preset=preset, **options)
+            scale = jnp.asarray(wl * _f_number_of(trace) / reference_scale, dtype)
+        yield (jax.tree_util.tree_map(lambda a: np.full(fields.shape, float(a)), aberrations),
+               fields, np.full(fields.shape, float(u * scale)),
+               _RescaledSignal(signal, scale), _RescaledNoise(noise, scale))
+
+
+def _lens_beyond(lens, u, signal, noise, fields, wavelengths, reference_scale, options):
+    """``lens_beyond_checked`` on checked arguments (a concrete, physical ``lens``; the
+    options ``lens_merit`` or ``optimise`` pass to ``jmse``, without grid options)."""
+    options = dict(options)
+    preset = options.pop("preset", "default")
+    beyond = np.zeros(np.shape(fields), bool)
+    for design in _lens_designs(lens, u, signal, noise, fields, wavelengths, reference_scale):
+        beyond |= beyond_checked(*design, preset=preset, **options)
     return beyond
 
 

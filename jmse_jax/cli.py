@@ -466,16 +466,16 @@ def _cmd_optimise(args) -> int:
                              max_steps=args.max_steps, jmse_options={"preset": args.preset})
     report_warnings(caught)
     print(result.summary())
-    # The JMSE figures above are jmse's at the start's and the result's Seidel waves: the
-    # warnings jmse gives such designs (e.g. a large --image-shift) are given here too.
-    import jax
-    import numpy as np
+    # The JMSE figures above are jmse's on the designs lens_merit gives it for the start and
+    # the result (their Seidel waves, the band and spectra referred to the start's lambda N):
+    # the warnings jmse gives such designs (e.g. a large --image-shift) are given here too,
+    # on the designs result.beyond_checked marks.
+    from ._optimise import _lens_designs
 
-    fields = np.asarray(result.fields, float)
     for lens in (start, result.lens):
-        waves = jl.seidel_waves(lens)
-        warn_like_jmse(jax.tree_util.tree_map(lambda x: np.full(fields.shape, float(x)), waves),
-                       fields, np.full(fields.shape, args.u), signal, noise, args.preset)
+        for design in _lens_designs(lens, args.u, signal, noise, result.fields, None,
+                                    result.reference_scale):
+            warn_like_jmse(*design, args.preset)
     # The lens stores the stop's position on the axis (stop_position = -stop distance); report
     # it as --stop-distance takes it.
     final = dict(stop_distance_mm=-float(result.lens.stop_position),

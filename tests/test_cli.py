@@ -406,7 +406,7 @@ def test_optimise_reports_the_stop_distance_as_its_flag_takes_it(capsys, tmp_pat
             merit="jmse", parameters=parameters, value=1e-3, jmse=1e-3, jmse_per_field=[1e-3],
             fields=[0.0], rms_wavefront=0.1, start_jmse=2e-3, start_rms_wavefront=0.2,
             lens=lens, iterations=3, wall_time=0.1, result="successful", solver="bfgs",
-            beyond_checked=(True,))
+            beyond_checked=(True,), reference_scale=None)
 
     monkeypatch.setattr(jj, "optimise", fake_optimise)
     out_json = tmp_path / "opt.json"
@@ -428,7 +428,7 @@ def _stand_in_result(lens, image_shift, rms_wavefront):
         parameters={"image_shift": image_shift}, value=1e-2, jmse=1e-2, jmse_per_field=[1e-2],
         fields=[0.0], rms_wavefront=rms_wavefront, start_jmse=1e-2, start_rms_wavefront=0.1,
         lens=lens, iterations=1, wall_time=0.1, result="successful", solver="bfgs",
-        beyond_checked=None)
+        beyond_checked=None, reference_scale=None)
 
 
 def test_optimise_warns_as_jmse_does_for_designs_beyond_the_checked_strength(capsys,
@@ -449,6 +449,29 @@ def test_optimise_warns_as_jmse_does_for_designs_beyond_the_checked_strength(cap
     assert status == 0
     assert err.count("warning: aberration_strength") == 1  # the result, not the start
     assert f"{strength:.3g}" in err
+
+
+def test_optimise_warns_on_the_designs_its_merit_computes(capsys, monkeypatch):
+    """The command's warnings for the result are those of the designs ``lens_merit`` hands
+    to ``jmse`` (``result.beyond_checked``'s): on the axis its rescaled noise model takes the
+    polar grid, where ``fast`` has no balanced grid for terms that cancel, so a cancelling
+    result on the axis warns, as the flag says, although ``jmse`` with a plain ``WhiteNoise``
+    (the one-ray plan) would not. Oracles: ``lens_beyond_checked`` and ``beyond_checked``."""
+    lens = jl.Singlet(0.04, -0.17, 1.5, 1.5168, stop_distance=1.0, f_number=4.6,
+                      field_angle=20.0, image_shift=-0.5)  # 5 waves of defocus, 1.6 spherical
+    fast = {"preset": "fast"}
+    assert jj.lens_beyond_checked(lens, u=0.4, fields=(0.0,), jmse_options=fast).tolist() == [
+        True]
+    assert not jj.beyond_checked(jl.seidel_waves(lens), 0.0, 0.4, jj.MarkovSignal(1.0, 5.0),
+                                 jj.WhiteNoise(1e-3), preset="fast")
+
+    def fake_optimise(start, variables, **options):
+        return _stand_in_result(lens, image_shift=-0.5, rms_wavefront=1.0)
+
+    monkeypatch.setattr(jj, "optimise", fake_optimise)
+    status, _, err = run_cli(capsys, "optimise", "--preset", "fast", "--u", "0.4")
+    assert status == 0
+    assert err.count("jmse-jax: warning: the terms of the design cancel") == 1
 
 
 def test_optimise_prints_the_warnings_of_the_designs_it_tried_once(capsys, monkeypatch):
