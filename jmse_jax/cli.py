@@ -473,9 +473,9 @@ def _cmd_optimise(args) -> int:
     from ._optimise import _lens_designs
 
     for lens in (start, result.lens):
-        for design in _lens_designs(lens, args.u, signal, noise, result.fields, None,
-                                    result.reference_scale):
-            warn_like_jmse(*design, args.preset)
+        for waves, fields, band, scaled_signal, scaled_noise in _lens_designs(
+                lens, args.u, signal, noise, result.fields, None, result.reference_scale):
+            warn_like_jmse(waves, fields, band, scaled_signal, scaled_noise, args.preset)
     # The lens stores the stop's position on the axis (stop_position = -stop distance); report
     # it as --stop-distance takes it.
     final = dict(stop_distance_mm=-float(result.lens.stop_position),
