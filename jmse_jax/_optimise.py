@@ -345,6 +345,26 @@ def lens_beyond_checked(
     return _lens_beyond(lens, u, signal, noise, fields, wavelengths, reference_scale, options)
 
 
+def _wavelength_traces(lens, wavelengths, reference_scale):
+    """What ``lens_merit`` takes per wavelength: the reference wavelength's trace, the
+    ``(wavelength, trace)`` pairs averaged over (None: the reference alone), and the
+    ``lambda N`` that ``u`` and the spectra refer to: None where they are the lens's own
+    (one wavelength, no ``reference_scale``), else ``reference_scale`` or the lens's own
+    ``lambda N``. ``_wavelength_scale`` gives each wavelength's factor."""
+    reference = paraxial_trace(lens)
+    if wavelengths is None:
+        return reference, [(lens.wavelength, reference)], reference_scale
+    if reference_scale is None:
+        reference_scale = lens.wavelength * _f_number_of(reference)
+    return reference, [(wl, paraxial_trace(lens, wl)) for wl in wavelengths], reference_scale
+
+
+def _wavelength_scale(wl, trace, reference_scale):
+    """``lambda N / reference_scale`` at a wavelength of ``_wavelength_traces`` (None where
+    ``u`` and the spectra are the lens's own)."""
+    return None if reference_scale is None else wl * _f_number_of(trace) / reference_scale
+
+
 def _lens_designs(lens, u, signal, noise, fields, wavelengths, reference_scale):
     """The designs ``lens_merit`` hands to ``jmse`` (``_merit_table``), one batch per
     wavelength: ``(aberrations, fields, band, signal, noise)``, the aberrations' leaves and
@@ -354,18 +374,12 @@ def _lens_designs(lens, u, signal, noise, fields, wavelengths, reference_scale):
     noise = WhiteNoise(1e-3) if noise is None else noise
     fields = np.asarray(fields, float)
     dtype = lens.ep_radius.dtype
-    reference = paraxial_trace(lens)
-    own_reference = reference_scale is None
-    if own_reference:
-        reference_scale = lens.wavelength * _f_number_of(reference)
-    monochromatic = wavelengths is None
-    for wl in [lens.wavelength] if monochromatic else list(wavelengths):
-        trace = reference if monochromatic else paraxial_trace(lens, wl)
+    reference, per_wavelength, reference_scale = _wavelength_traces(lens, wavelengths,
+                                                                    reference_scale)
+    for wl, trace in per_wavelength:
         aberrations = _waves_from_traces(lens, trace, reference, wl)
-        if monochromatic and own_reference:
-            scale = jnp.ones((), dtype)
-        else:
-            scale = jnp.asarray(wl * _f_number_of(trace) / reference_scale, dtype)
+        scale = _wavelength_scale(wl, trace, reference_scale)
+        scale = jnp.ones((), dtype) if scale is None else jnp.asarray(scale, dtype)
         yield (jax.tree_util.tree_map(lambda a: np.full(fields.shape, float(a)), aberrations),
                fields, np.full(fields.shape, float(u * scale)),
                _RescaledSignal(signal, scale), _RescaledNoise(noise, scale))
@@ -425,18 +439,13 @@ def _merit_table(lens, merit, u, signal, noise, fields, wavelengths, reference_s
         lambda a: jnp.where(finite, a, jax.lax.stop_gradient(
             jnp.where(jnp.isfinite(a), a, jnp.ones_like(a))))
         if eqx.is_inexact_array(a) else a, lens)
-    monochromatic = wavelengths is None
-    wavelengths = [lens.wavelength] if monochromatic else list(wavelengths)
-    reference = paraxial_trace(lens)
-    traces = [reference if monochromatic else paraxial_trace(lens, wl) for wl in wavelengths]
+    reference, per_wavelength, reference_scale = _wavelength_traces(lens, wavelengths,
+                                                                    reference_scale)
     # Valid at the reference wavelength and at every wavelength averaged over.
     ok = _status(lens, reference).ok & finite
-    if not monochromatic:
-        for trace in traces:
+    if wavelengths is not None:
+        for _, trace in per_wavelength:
             ok = ok & _status(lens, trace).ok
-    own_reference = reference_scale is None
-    if own_reference:
-        reference_scale = lens.wavelength * _f_number_of(reference)
     u = jnp.asarray(u, dtype)
     # The default's tiers pick a grid per field. One field at a time (lax.map), each field
     # runs only its own grid; under a vectorised vmap every grid that any field picks runs
@@ -447,7 +456,7 @@ def _merit_table(lens, merit, u, signal, noise, fields, wavelengths, reference_s
     tiered = _full_jmse_options(**jmse_options)["tiers"] is not None
 
     rows = []
-    for wl, trace in zip(wavelengths, traces, strict=True):
+    for wl, trace in per_wavelength:
         aberrations = _waves_from_traces(lens, trace, reference, wl)
         aberrations = jax.tree_util.tree_map(
             lambda a: jnp.where(ok, a, jnp.zeros_like(a)), aberrations
@@ -456,10 +465,10 @@ def _merit_table(lens, merit, u, signal, noise, fields, wavelengths, reference_s
             rows.append(jax.vmap(lambda h, ab=aberrations: rms_wavefront_error(ab, h) ** 2)(
                 fields))
             continue
-        if monochromatic and own_reference:
+        scale = _wavelength_scale(wl, trace, reference_scale)
+        if scale is None:
             scale = jnp.ones((), dtype)
         else:
-            scale = wl * _f_number_of(trace) / reference_scale
             scale = jnp.where(ok & (scale > 0), scale, jnp.ones_like(scale))
         band = u * scale
         spectra = (_RescaledSignal(signal, scale), _RescaledNoise(noise, scale))
