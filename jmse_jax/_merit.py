@@ -57,7 +57,7 @@ from ._quadrature import (
 )
 from ._radial import radial_band_integral
 from ._ridges import ridge_peaks
-from ._spectra import AbstractNoise, AbstractSignal, error_spectral_density
+from ._spectra import AbstractNoise, AbstractSignal, error_spectral_density, x_mirrored
 
 __all__ = [
     "DEFAULT_TIERS",
@@ -1062,25 +1062,29 @@ def _band_integrals(aberrations, field, u, signal, noise, options, dtype, mirror
     x-mirrored one too (a list of one or two); with ``estimate``, each with its
     ``_interpolation_estimate``.
 
-    The polar rule computes the OTF of both quadrants in one call of the overlap engine
-    (the nodes of the two stacked): a wavefront that is not even in x then traces and
-    compiles one OTF stage per panel instead of two, with the same values node by node."""
+    The mirrored quadrant takes the OTF at ``(-nu_x, nu_y)`` and the spectra there
+    (``x_mirrored``): a wavefront even in x has the same OTF in both, which is then computed
+    once, and spectra that are not mirror symmetric differ. The polar rule computes the OTF
+    of both quadrants in one call of the overlap engine (the nodes of the two stacked): a
+    wavefront that is not even in x then traces and compiles one OTF stage per panel
+    instead of two, with the same values node by node."""
     signs = (1.0, -1.0) if mirrored else (1.0,)
+    spectra = [(signal, noise), x_mirrored(signal, noise)][:len(signs)]
     if options["quadrature"] != "polar":
         nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
-        s_x, s_n = signal(nu_x, nu_y), noise(nu_x, nu_y)
         return [jnp.sum(w * error_spectral_density(
-            _otf_at(aberrations, sign * nu_x, nu_y, field, options), s_x, s_n))
-            for sign in signs]
+            _otf_at(aberrations, sign * nu_x, nu_y, field, options), s(nu_x, nu_y),
+            n(nu_x, nu_y))) for sign, (s, n) in zip(signs, spectra, strict=True)]
     coarse = polar_panels(u, *options["nodes"], dtype)
-    if mirrored:
+    if mirrored and not aberrations.x_symmetric:
         nu_x = jnp.stack([coarse.nu_x, -coarse.nu_x])
         h_all = _polar_otf(aberrations, nu_x, jnp.broadcast_to(coarse.nu_y, nu_x.shape), field,
                            options)
-    else:  # the nodes as they are (an even wavefront's one quadrant)
+    else:  # the nodes as they are (an even wavefront's one quadrant, or both alike)
         h_all = [_polar_otf(aberrations, coarse.nu_x, coarse.nu_y, field, options)]
+        h_all = h_all * len(signs)
     out = []
-    for h in h_all:
+    for h, (signal, noise) in zip(h_all, spectra, strict=True):
         if options["se_nodes"] is None:
             s_e = error_spectral_density(h, signal(coarse.nu_x, coarse.nu_y),
                                          noise(coarse.nu_x, coarse.nu_y))
@@ -1224,18 +1228,42 @@ def aberration_strength(aberrations: AbstractAberrations, field, u):
 
 
 def _ring_snr(strength, u, signal, noise):
-    """``S_x / S_n`` at the innermost ring where the OTF of a design of this strength can
+    """``S_x / S_n`` on the innermost ring where the OTF of a design of this strength can
     vanish, ``_RING_FRACTION u / strength`` from the origin (at most the band's corner,
-    ``sqrt(2) u``), along the ``nu_x`` axis (the package's spectra are isotropic);
-    traceable."""
-    return _snr_at(jnp.minimum(_RING_FRACTION * u / jnp.maximum(strength, 1e-30),
-                               jnp.sqrt(2.0) * u), signal, noise)
+    ``sqrt(2) u``; ``_snr_on_ring``); traceable."""
+    return _snr_on_ring(jnp.minimum(_RING_FRACTION * u / jnp.maximum(strength, 1e-30),
+                                    jnp.sqrt(2.0) * u), u, signal, noise)
 
 
 def _edge_snr(u, signal, noise):
-    """``S_x / S_n`` at the band's edge, ``min(sqrt(2) u, 1)`` from the origin (along the
-    ``nu_x`` axis; the package's spectra are isotropic); traceable."""
-    return _snr_at(jnp.minimum(jnp.sqrt(2.0) * u, 1.0), signal, noise)
+    """``S_x / S_n`` at the band's edge, ``min(sqrt(2) u, 1)`` from the origin
+    (``_snr_on_ring``); traceable."""
+    return _snr_on_ring(jnp.minimum(jnp.sqrt(2.0) * u, 1.0), u, signal, noise)
+
+
+#: Points per quadrant on which ``_snr_on_ring`` takes the largest ``S_x / S_n`` of spectra
+#: that are not isotropic.
+_RING_POINTS = 17
+
+
+def _snr_on_ring(r, u, signal, noise):
+    """The largest ``S_x / S_n`` on the ring ``|nu| = r`` inside the band ``[-u, u]^2``:
+    for isotropic spectra its value at ``(r, 0)``; for others the largest at
+    ``_RING_POINTS`` angles on the ring's arc in the first quadrant, and in the second too
+    unless both are ``x_symmetric`` (``S(-nu) = S(nu)`` gives the other two). The point
+    ``(r, 0)`` can lie outside the band (``r > u``), where such spectra need not resemble
+    the band's. Traceable; no derivative flows through it (the tiers' choice)."""
+    if signal.isotropic and noise.isotropic:
+        return _snr_at(r, signal, noise)
+    r, u = jax.lax.stop_gradient(r), jax.lax.stop_gradient(u)
+    # The arc inside the square: nu_x = r cos(theta) <= u and nu_y = r sin(theta) <= u.
+    ratio = jnp.clip(u / r, 0.0, 1.0)
+    low, high = jnp.arccos(ratio), jnp.arcsin(ratio)
+    theta = low + (high - low) * jnp.linspace(0.0, 1.0, _RING_POINTS, dtype=r.dtype)
+    nu_x, nu_y = r * jnp.cos(theta), r * jnp.sin(theta)
+    if not (signal.x_symmetric and noise.x_symmetric):
+        nu_x, nu_y = jnp.concatenate([nu_x, -nu_x]), jnp.concatenate([nu_y, nu_y])
+    return jnp.max(signal(nu_x, nu_y) / noise(nu_x, nu_y))
 
 
 def _snr_at(nu, signal, noise):
@@ -1359,6 +1387,12 @@ def _one_ray_value_and_gradient_jvp(static, wrt, primals, tangents):
     return (value, gradient), (d_value, d_gradient)
 
 
+def _mirror_symmetric(aberrations, signal, noise) -> bool:
+    """Whether ``S_e(-nu_x, nu_y) = S_e(nu_x, nu_y)`` by the models' static properties, so
+    that one of the band's x-mirrored quadrants serves for both."""
+    return aberrations.x_symmetric and signal.x_symmetric and noise.x_symmetric
+
+
 def _merit_value(options, dtype, aberrations, field, u, signal, noise, estimate=False):
     """The merit on the grid of ``options``; with ``estimate``, ``(merit, estimate)`` with
     the relative interpolation-error estimate of ``_interpolation_estimate`` (the larger of
@@ -1370,9 +1404,10 @@ def _merit_value(options, dtype, aberrations, field, u, signal, noise, estimate=
     if options.get("_radial"):  # a plan for rotationally symmetric designs (see jmse)
         return _one_ray_merit(_Static((options, dtype)), (aberrations, field, u, signal, noise))
     halves = _band_integrals(aberrations, field, u, signal, noise, options, dtype,
-                             not aberrations.x_symmetric, estimate=estimate)
+                             not _mirror_symmetric(aberrations, signal, noise),
+                             estimate=estimate)
     total = halves[0]
-    if len(halves) == 2:  # a wavefront not even in x: the mirrored quadrant too
+    if len(halves) == 2:  # a wavefront or spectra not even in x: the mirrored quadrant too
         mirrored = halves[1]
         if estimate:
             return (0.5 * (total[0] + mirrored[0]) / (2.0 * math.pi),
@@ -2741,10 +2776,13 @@ def _concrete_choice(static, aberrations, field, u, signal=None, noise=None):
 @jax.jit
 def _peak_snr(u, signal, noise):
     """``max S_x / S_n`` over a 17 x 17 grid of the band's quadrant ``[0, u]^2`` (for the
-    package's spectra: at ``nu = 0``), in the spectra's dtype; one small compiled program
+    package's spectra: at ``nu = 0``), and of its x-mirror ``[-u, 0] x [0, u]`` too for
+    spectra not ``x_symmetric``, in the spectra's dtype; one small compiled program
     (eager, the grid's spectra cost about 0.6 ms of every concrete call)."""
     axis = jnp.linspace(0.0, 1.0, 17) * u
     nu_x, nu_y = jnp.meshgrid(axis, axis)
+    if not (signal.x_symmetric and noise.x_symmetric):
+        nu_x, nu_y = jnp.concatenate([nu_x, -nu_x]), jnp.concatenate([nu_y, nu_y])
     return jnp.max(signal(nu_x, nu_y) / noise(nu_x, nu_y))
 
 

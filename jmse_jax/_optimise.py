@@ -87,6 +87,10 @@ class _RescaledNoise(AbstractNoise):
     def __call__(self, nu_x, nu_y):
         return self.base(nu_x / self.scale, nu_y / self.scale) / (self.scale * self.scale)
 
+    @property
+    def x_symmetric(self) -> bool:
+        return self.base.x_symmetric
+
 
 def _f_number_of(trace):
     slope = trace.u[-1]

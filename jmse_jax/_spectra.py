@@ -1,7 +1,12 @@
 """Signal and noise power spectra, the Wiener filter and its error spectral density.
 
-Frequencies are in units of the incoherent cutoff ``1/(lambda N)`` (SPEC §2); all signal
-models are isotropic functions of ``r = |nu|``.
+Frequencies are in units of the incoherent cutoff ``1/(lambda N)`` (SPEC §2); the package's
+models are isotropic functions of ``r = |nu|``. A model of one's own (a subclass of
+``AbstractSignal`` that overrides ``__call__``, or of ``AbstractNoise``) may depend on the
+direction of ``nu`` too; it must be even, ``S(-nu) = S(nu)``, as the spectrum of every real
+image or noise field is. ``jmse`` integrates the band's x-mirrored quadrants apart unless
+the model says it is mirror symmetric (``x_symmetric``), so a model that is not, such as an
+oriented texture's, is integrated as it is.
 """
 
 from __future__ import annotations
@@ -59,7 +64,9 @@ def _positive(*values):
 
 
 class AbstractSignal(eqx.Module):
-    """An isotropic signal power spectral density ``S_x(nu)``."""
+    """An isotropic signal power spectral density ``S_x(nu)`` (a subclass may override
+    ``__call__`` for one that depends on the direction of ``nu``; it must be even, see the
+    module's notes)."""
 
     @abc.abstractmethod
     def radial(self, r):
@@ -74,6 +81,13 @@ class AbstractSignal(eqx.Module):
         """True when ``S_x(nu) = radial(|nu|)`` (a subclass that overrides ``__call__`` is
         not assumed to be)."""
         return type(self).__call__ is AbstractSignal.__call__
+
+    @property
+    def x_symmetric(self) -> bool:
+        """True when ``S_x(-nu_x, nu_y) = S_x(nu_x, nu_y)``: ``jmse`` then integrates one
+        of the band's x-mirrored quadrants for a wavefront even in x, and otherwise both
+        (isotropic models are; a subclass that overrides ``__call__`` may say so)."""
+        return self.isotropic
 
     def valid(self):
         """Whether the parameters are in range, as a (traceable) boolean: ``jmse`` under
@@ -170,6 +184,12 @@ class AbstractNoise(eqx.Module):
         """True when ``S_n`` depends on ``|nu|`` only (False unless a subclass says so)."""
         return False
 
+    @property
+    def x_symmetric(self) -> bool:
+        """True when ``S_n(-nu_x, nu_y) = S_n(nu_x, nu_y)`` (see
+        ``AbstractSignal.x_symmetric``): isotropic models are; a subclass may say so."""
+        return self.isotropic
+
     def valid(self):
         """Whether the parameters are in range, as a (traceable) boolean (see
         ``AbstractSignal.valid``). True unless a subclass says otherwise."""
@@ -207,6 +227,40 @@ class WhiteNoise(AbstractNoise):
     @property
     def isotropic(self) -> bool:
         return True
+
+
+class _MirroredSignal(AbstractSignal):
+    """``S_x(-nu_x, nu_y)`` of a signal model (the x-mirrored quadrant's spectrum)."""
+
+    base: AbstractSignal
+
+    def radial(self, r):
+        return self.base.radial(r)
+
+    def __call__(self, nu_x, nu_y):
+        return self.base(-nu_x, nu_y)
+
+    def valid(self):
+        return self.base.valid()
+
+
+class _MirroredNoise(AbstractNoise):
+    """``S_n(-nu_x, nu_y)`` of a noise model."""
+
+    base: AbstractNoise
+
+    def __call__(self, nu_x, nu_y):
+        return self.base(-nu_x, nu_y)
+
+    def valid(self):
+        return self.base.valid()
+
+
+def x_mirrored(signal, noise):
+    """The spectra as seen from the band's x-mirrored quadrant (``S(-nu_x, nu_y)``); a
+    model that is ``x_symmetric`` as it is."""
+    return (signal if signal.x_symmetric else _MirroredSignal(signal),
+            noise if noise.x_symmetric else _MirroredNoise(noise))
 
 
 def error_spectral_density(otf, signal_psd, noise_psd):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,6 +14,7 @@ from compiled import fast_value_and_grad_in_everything
 from scipy import integrate
 
 import jmse_jax as jj
+from jmse_jax import _merit
 
 RNG = np.random.default_rng(7)
 NU_X, NU_Y = RNG.uniform(-1.5, 1.5, (2, 40))
@@ -129,3 +131,150 @@ def test_overflowing_spectrum_under_jit_is_inf_not_nan():
     assert float(sane) == pytest.approx(
         float(jj.jmse(ab, 0.0, 0.2, jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3),
                       preset="fast")), rel=1e-14)
+
+
+# --------------------------------------------------------------------------------------
+# Spectra that depend on the direction of nu (models of one's own)
+# --------------------------------------------------------------------------------------
+
+FIG1 = (jj.Seidel(w020=-2.75, w222=1.4089, w131=-1.2602, w040=1.5578, w220=2.7198), 0.95, 0.2)
+
+
+class _SkewNoise(jj.AbstractNoise):
+    """Noise of an oriented texture: even (``S(-nu) = S(nu)``, as every real field's
+    spectrum), but not mirror symmetric in ``nu_x``."""
+
+    variance: float
+    tilt: float
+    u: float
+
+    def __call__(self, nu_x, nu_y):
+        return self.variance * (1.0 + self.tilt * nu_x * nu_y / self.u**2)
+
+
+class _SkewSignal(jj.AbstractSignal):
+    """A signal spectrum tilted the same way."""
+
+    base: jj.AbstractSignal
+    tilt: float
+    u: float
+
+    def radial(self, r):
+        return self.base.radial(r)
+
+    def __call__(self, nu_x, nu_y):
+        return self.base(nu_x, nu_y) * (1.0 + self.tilt * nu_x * nu_y / self.u**2)
+
+
+class _StretchedNoise(jj.AbstractNoise):
+    """Anisotropic but mirror symmetric; ``declared`` says so (``x_symmetric``)."""
+
+    variance: float
+    stretch: float
+    u: float
+    declared: bool = eqx.field(static=True)
+
+    def __call__(self, nu_x, nu_y):
+        return self.variance * (1.0 + self.stretch * (nu_x**2 - nu_y**2) / self.u**2)
+
+    @property
+    def x_symmetric(self):
+        return self.declared
+
+
+def _whole_band(aberrations, field, u, signal, noise, n=100):
+    """``(1 / 2 pi) iint S_e`` over the whole band ``[-u, u]^2``, nothing folded: a tensor
+    Gauss rule of ``n`` nodes per half axis on ``jj.otf``'s OTF with overlap nodes (64, 64)
+    (float64 brute force)."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    axis = np.concatenate([(x - 1.0) * u / 2, (x + 1.0) * u / 2])
+    weights = np.concatenate([w, w]) * u / 2
+    nu_x, nu_y = (jnp.asarray(a) for a in np.meshgrid(axis, axis, indexing="ij"))
+    s_e = jj.error_spectral_density(jj.otf(aberrations, nu_x, nu_y, field, nodes=(64, 64)),
+                                    signal(nu_x, nu_y), noise(nu_x, nu_y))
+    return float(np.sum(np.asarray(s_e) * np.outer(weights, weights))) / (2.0 * math.pi)
+
+
+@pytest.mark.parametrize("skewed", ["noise", "signal"])
+def test_spectra_not_mirror_symmetric_are_integrated_over_both_quadrants(skewed):
+    """A spectrum tilted along a diagonal: ``jmse`` folded the band onto its first quadrant
+    and was 20 % off (0.003064 and 0.002055 for the two tilts against 0.002559); both tilts
+    now give the whole band's integral, and the same value (the wavefront is even in x)."""
+    ab, field, u = FIG1
+    signal, noise = jj.MarkovSignal(1.0, 5.0), jj.WhiteNoise(1e-3)
+    values = []
+    for tilt in (0.9, -0.9):
+        if skewed == "noise":
+            noise = _SkewNoise(1e-3, tilt, u)
+        else:
+            signal = _SkewSignal(jj.MarkovSignal(1.0, 5.0), tilt, u)
+        assert not (signal.x_symmetric and noise.x_symmetric)
+        values.append(float(jj.jmse(ab, field, u, signal, noise)))
+        assert values[-1] == pytest.approx(_whole_band(ab, field, u, signal, noise), rel=2e-6)
+    assert values[0] == pytest.approx(values[1], rel=1e-12)
+
+
+def test_tilted_noise_on_a_wavefront_not_even_in_x_and_another_quadrature():
+    """Both halves differ there (the OTF and the spectra; the whole band's integral with
+    200 nodes per half axis is itself about 1e-6 from the converged value on this design).
+    The Gauss product rule's mirrored half takes the mirrored spectra too: both tilts give
+    the same value, within the rule's own error of the whole band's integral."""
+    ab = jj.Zernike([0.8, -0.6, 0.5, -0.4], noll=(5, 6, 7, 8))
+    assert not ab.x_symmetric
+    u, signal, noise = 0.3, jj.MarkovSignal(1.0, 3.0), _SkewNoise(3e-3, 0.8, 0.3)
+    whole = _whole_band(ab, 0.5, u, signal, noise, n=200)
+    assert float(jj.jmse(ab, 0.5, u, signal, noise)) == pytest.approx(whole, rel=3e-6)
+    ab, field, u = FIG1
+    signal = jj.MarkovSignal(1.0, 5.0)
+    gauss = [float(jj.jmse(ab, field, u, signal, _SkewNoise(1e-3, tilt, u), quadrature="gauss",
+                           nodes=32)) for tilt in (0.9, -0.9)]
+    assert gauss[0] == pytest.approx(gauss[1], rel=1e-14)
+    assert gauss[0] == pytest.approx(
+        _whole_band(ab, field, u, signal, _SkewNoise(1e-3, 0.9, u)), rel=1e-2)
+
+
+def test_a_mirror_symmetric_model_may_say_so():
+    """Declared ``x_symmetric``, the model takes one quadrant; undeclared, both (the same
+    value, as the whole band's integral)."""
+    ab, field, u = FIG1
+    signal = jj.MarkovSignal(1.0, 5.0)
+    declared, undeclared = (_StretchedNoise(1e-3, 0.5, u, flag) for flag in (True, False))
+    assert declared.x_symmetric and not undeclared.x_symmetric
+    value = float(jj.jmse(ab, field, u, signal, declared))
+    assert value == pytest.approx(float(jj.jmse(ab, field, u, signal, undeclared)), rel=1e-13)
+    assert value == pytest.approx(_whole_band(ab, field, u, signal, declared), rel=2e-6)
+
+
+class _BandWhiteNoise(jj.AbstractNoise):
+    """``WhiteNoise(variance)`` inside the band ``[-u, u]^2``, louder beyond it along
+    ``nu_x``, where the merit never looks."""
+
+    variance: float
+    u: float
+
+    def __call__(self, nu_x, nu_y):
+        beyond = jnp.maximum(nu_x * nu_x - self.u**2, 0.0) / self.u**2
+        return self.variance * (1.0 + 250.0 * beyond * beyond)
+
+
+def test_the_tiers_read_anisotropic_spectra_inside_the_band():
+    """The default's tiers read ``S_x / S_n`` at the band's corner and on a ring; for
+    isotropic spectra at ``(r, 0)``, which for ``r > u`` lies outside the band. A noise
+    equal to white noise inside the band gave the same design tier 2 instead of the
+    steep tier 4, 5e-4 off; it now takes the white noise's tier and value. (A band whose
+    corner is near the cutoff at high SNR, ``test_tiers.py``'s ``CORNER_DESIGN``.)"""
+    ab = jj.Seidel(w020=1.4338, w040=-0.2546, w131=-0.7411, w222=-1.5247, w220=-1.19)
+    field, u, signal = 0.827, 0.703, jj.PowerLawSignal(0.88, 2.638, 0.643)
+    white, band_white = jj.WhiteNoise(1.97e-6), _BandWhiteNoise(1.97e-6, u)
+    routes = [_merit._route(ab, field, u, signal, noise) for noise in (white, band_white)]
+    assert routes[0]["tier"] == routes[1]["tier"] == 4
+    assert float(routes[1]["value"]) == pytest.approx(float(routes[0]["value"]), rel=1e-12)
+
+
+def test_peak_snr_looks_at_both_quadrants_of_spectra_not_mirror_symmetric():
+    """The quietest point of the tilted noise lies in the second quadrant's corner, where
+    ``S_n`` is a tenth of its value on the axes."""
+    u = 0.3
+    peak = float(_merit._peak_snr(u, jj.WhiteSignal(1.0), _SkewNoise(1e-3, 0.9, u)))
+    assert peak == pytest.approx(1e4, rel=1e-12)
+    assert float(_merit._peak_snr(u, jj.WhiteSignal(1.0), _SkewNoise(1e-3, -0.9, u))) == peak
