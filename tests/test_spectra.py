@@ -214,6 +214,27 @@ def test_spectra_not_mirror_symmetric_are_integrated_over_both_quadrants(skewed)
     assert values[0] == pytest.approx(values[1], rel=1e-12)
 
 
+def test_gradient_with_a_tilted_noise_is_the_finite_difference():
+    """The mirrored quadrant's spectra carry the noise's parameters: the gradient in a
+    coefficient, the noise variance and the tilt is the central difference's (float64)."""
+    _, field, u = FIG1
+    signal = jj.MarkovSignal(1.0, 5.0)
+
+    def merit(w020, variance, tilt):
+        ab = jj.Seidel(w020=w020, w222=1.4089, w131=-1.2602, w040=1.5578, w220=2.7198)
+        return jj.jmse(ab, field, u, signal, _SkewNoise(variance, tilt, u))
+
+    point = (-2.75, 1e-3, 0.6)
+    grad = jax.grad(merit, argnums=(0, 1, 2))(*point)
+    for i, step in enumerate((1e-5, 1e-8, 1e-5)):
+        up, down = list(point), list(point)
+        up[i] += step
+        down[i] -= step
+        difference = (float(merit(*up)) - float(merit(*down))) / (2 * step)
+        assert np.isfinite(float(grad[i]))
+        assert float(grad[i]) == pytest.approx(difference, rel=1e-5), i
+
+
 def test_tilted_noise_on_a_wavefront_not_even_in_x_and_another_quadrature():
     """Both halves differ there (the OTF and the spectra; the whole band's integral with
     200 nodes per half axis is itself about 1e-6 from the converged value on this design).
@@ -260,15 +281,31 @@ class _BandWhiteNoise(jj.AbstractNoise):
 def test_the_tiers_read_anisotropic_spectra_inside_the_band():
     """The default's tiers read ``S_x / S_n`` at the band's corner and on a ring; for
     isotropic spectra at ``(r, 0)``, which for ``r > u`` lies outside the band. A noise
-    equal to white noise inside the band gave the same design tier 2 instead of the
-    steep tier 4, 5e-4 off; it now takes the white noise's tier and value. (A band whose
-    corner is near the cutoff at high SNR, ``test_tiers.py``'s ``CORNER_DESIGN``.)"""
+    equal to white noise inside the band read 251 times lower there and sent this design
+    (a band whose corner is near the cutoff at high SNR, ``test_tiers.py``'s
+    ``CORNER_DESIGN``) to tier 2 instead of the steep tier 4, 1.2e-3 off the converged
+    value (white noise's, the same in the band) where tier 4 is 6e-7 off. It now reads the
+    white noise's values and takes its plan."""
     ab = jj.Seidel(w020=1.4338, w040=-0.2546, w131=-0.7411, w222=-1.5247, w220=-1.19)
     field, u, signal = 0.827, 0.703, jj.PowerLawSignal(0.88, 2.638, 0.643)
     white, band_white = jj.WhiteNoise(1.97e-6), _BandWhiteNoise(1.97e-6, u)
-    routes = [_merit._route(ab, field, u, signal, noise) for noise in (white, band_white)]
-    assert routes[0]["tier"] == routes[1]["tier"] == 4
-    assert float(routes[1]["value"]) == pytest.approx(float(routes[0]["value"]), rel=1e-12)
+    assert float(band_white(jnp.sqrt(2.0) * u, 0.0)) > 250 * 1.97e-6  # (r, 0) is louder
+    for probe in (_merit._edge_snr(u, signal, white),
+                  _merit._ring_snr(jnp.asarray(0.5), u, signal, white)):
+        assert float(probe) > 1e4
+    assert float(_merit._edge_snr(u, signal, band_white)) == pytest.approx(
+        float(_merit._edge_snr(u, signal, white)), rel=1e-12)
+    # The ring of a strength-0.5 design reaches past u: 0.3 u / 0.5 = 0.42 < u, so the
+    # ring inside the band, and at strength 0.2 past it (1.05 > u).
+    for strength in (0.5, 0.2):
+        assert float(_merit._ring_snr(jnp.asarray(strength), u, signal, band_white)) == \
+            pytest.approx(float(_merit._ring_snr(jnp.asarray(strength), u, signal, white)),
+                          rel=1e-12)
+    plans = []
+    for noise in (white, band_white):
+        static, _ = _merit._prepare((ab, field, u, signal, noise), jj.jmse_options())
+        plans.append(int(_merit._tier_of(static, ab, field, u, signal, noise)[0]))
+    assert plans == [4, 4]
 
 
 def test_peak_snr_looks_at_both_quadrants_of_spectra_not_mirror_symmetric():
