@@ -738,6 +738,40 @@ def _validate(aberrations, field, u, signal, noise):
                 raise ValueError(
                     f"{name}{jax.tree_util.keystr(path)} must be a scalar (one design; "
                     f"vmap over designs), got shape {np.shape(leaf)}")
+        _check_symmetries(name, spectrum, u)
+
+
+#: Where ``_check_symmetries`` compares a spectrum of one's own with its reflections, as
+#: fractions of ``u`` (fixed, so that a check does not vary from call to call).
+_SYMMETRY_POINTS = np.array([[0.13, 0.71], [0.52, -0.28], [0.91, 0.37], [-0.64, 0.88],
+                             [0.35, 0.04], [0.77, -0.93], [0.06, 0.49], [-0.42, -0.17]])
+
+
+def _check_symmetries(name, spectrum, u):
+    """``ValueError`` unless a concrete spectrum of one's own (not isotropic) is even,
+    ``S(-nu) = S(nu)`` (the merit integrates half the band and doubles it), and, where it
+    says it is ``x_symmetric``, mirror symmetric in ``nu_x`` (the merit then folds the band
+    onto one quadrant): compared at eight points inside the band to 1e-9. Isotropic models
+    are both; under ``jit`` (a traced spectrum or ``u``) nothing is checked."""
+    if spectrum.isotropic or not is_concrete((spectrum, u)):
+        return
+    points = _SYMMETRY_POINTS * float(np.max(u))
+    nu_x, nu_y = (jnp.asarray(points[:, i]) for i in (0, 1))
+    values = np.asarray(spectrum(nu_x, nu_y), dtype=np.float64)
+    checks = [("even, S(-nu) = S(nu), as the spectrum of every real field is",
+               spectrum(-nu_x, -nu_y), "-nu")]
+    if spectrum.x_symmetric:
+        checks.append(("mirror symmetric, S(-nu_x, nu_y) = S(nu_x, nu_y), as its "
+                       "x_symmetric says", spectrum(-nu_x, nu_y), "(-nu_x, nu_y)"))
+    for what, reflected, where in checks:
+        reflected = np.asarray(reflected, dtype=np.float64)
+        gap = np.abs(reflected - values) > 1e-9 * np.maximum(np.abs(values), np.abs(reflected))
+        if np.any(gap):
+            i = int(np.argmax(gap))
+            raise ValueError(
+                f"{name} must be {what}; {type(spectrum).__name__} gives "
+                f"{float(values[i])!r} at nu = ({points[i, 0]:.4g}, {points[i, 1]:.4g}) and "
+                f"{float(reflected[i])!r} at {where}")
 
 
 def _sanitise(inputs):

@@ -315,3 +315,48 @@ def test_peak_snr_looks_at_both_quadrants_of_spectra_not_mirror_symmetric():
     peak = float(_merit._peak_snr(u, jj.WhiteSignal(1.0), _SkewNoise(1e-3, 0.9, u)))
     assert peak == pytest.approx(1e4, rel=1e-12)
     assert float(_merit._peak_snr(u, jj.WhiteSignal(1.0), _SkewNoise(1e-3, -0.9, u))) == peak
+
+
+class _OddNoise(jj.AbstractNoise):
+    """Not even: no real field has this spectrum."""
+
+    variance: float
+
+    def __call__(self, nu_x, nu_y):
+        return self.variance * (1.0 + 0.5 * jnp.tanh(nu_x))
+
+
+class _MisdeclaredNoise(_SkewNoise):
+    """Says it is mirror symmetric and is not."""
+
+    @property
+    def x_symmetric(self):
+        return True
+
+
+class _OddSignal(jj.AbstractSignal):
+    def radial(self, r):
+        return 1.0 / (1.0 + r * r)
+
+    def __call__(self, nu_x, nu_y):
+        return self.radial(jnp.hypot(nu_x, nu_y)) * (1.0 + 0.5 * jnp.tanh(nu_y))
+
+
+@pytest.mark.parametrize("signal, noise, match", [
+    (jj.MarkovSignal(1.0, 5.0), _OddNoise(1e-3),
+     r"noise must be even, S\(-nu\) = S\(nu\).*_OddNoise gives 0\.00101949\d* at nu = "
+     r"\(0\.039, 0\.213\) and 0\.00098050\d* at -nu"),
+    (jj.MarkovSignal(1.0, 5.0), _MisdeclaredNoise(1e-3, 0.5, 0.3),
+     r"noise must be mirror symmetric, S\(-nu_x, nu_y\) = S\(nu_x, nu_y\), as its "
+     r"x_symmetric says"),
+    (_OddSignal(), jj.WhiteNoise(1e-3), r"signal must be even"),
+])
+def test_spectra_that_break_their_symmetries_are_refused(signal, noise, match):
+    """The merit integrates half the band (and, for ``x_symmetric`` models, one quadrant)
+    and doubles it: a spectrum that is not even, or not the mirror image it says it is,
+    would give a wrong number, so a concrete call refuses it (the baseline too)."""
+    ab = jj.Seidel(w020=1.0)
+    with pytest.raises(ValueError, match=match):
+        jj.jmse(ab, 0.5, 0.3, signal, noise)
+    with pytest.raises(ValueError, match=match):
+        jj.baseline_jmse(ab, 0.5, 0.3, signal, noise)
