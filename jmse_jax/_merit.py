@@ -753,8 +753,8 @@ def _check_symmetries(name, spectrum, u):
     ``S(-nu) = S(nu)`` (the merit integrates half the band and doubles it), and, where it
     says it is ``x_symmetric``, mirror symmetric in ``nu_x`` (the merit then folds the band
     onto one quadrant): compared at eight points inside the band to 1e-9 (1e-4 in float32).
-    Isotropic models
-    are both; under ``jit`` (a traced spectrum or ``u``) nothing is checked."""
+    Isotropic models are both; under ``jit`` (a traced spectrum or ``u``) nothing is
+    checked."""
     if spectrum.isotropic or not is_concrete((spectrum, u)):
         return
     points = _SYMMETRY_POINTS * float(np.max(u))
