@@ -358,9 +358,13 @@ class _OddSignal(jj.AbstractSignal):
 def test_spectra_that_break_their_symmetries_are_refused(signal, noise, match):
     """The merit integrates half the band (and, for ``x_symmetric`` models, one quadrant)
     and doubles it: a spectrum that is not even, or not the mirror image it says it is,
-    would give a wrong number, so a concrete call refuses it (the baseline too)."""
+    would give a wrong number, so a concrete call refuses it (the baseline and sweeps
+    too)."""
     ab = jj.Seidel(w020=1.0)
     with pytest.raises(ValueError, match=match):
         jj.jmse(ab, 0.5, 0.3, signal, noise)
     with pytest.raises(ValueError, match=match):
         jj.baseline_jmse(ab, 0.5, 0.3, signal, noise)
+    with pytest.raises(ValueError, match=match):
+        jj.sweep_jmse(jj.Seidel(w020=jnp.asarray([1.0, 2.0])), 0.5, 0.3, signal, noise,
+                      progress=False)
