@@ -1109,7 +1109,7 @@ def _band_integrals(aberrations, field, u, signal, noise, options, dtype, mirror
     wavefront that is not even in x then traces and compiles one OTF stage per panel
     instead of two, with the same values node by node."""
     signs = (1.0, -1.0) if mirrored else (1.0,)
-    spectra = [(signal, noise), x_mirrored(signal, noise)][:len(signs)]
+    spectra = [(signal, noise), x_mirrored(signal, noise)] if mirrored else [(signal, noise)]
     if options["quadrature"] != "polar":
         nu_x, nu_y, w = frequency_quadrature(options["quadrature"], u, options["nodes"], dtype)
         return [jnp.sum(w * error_spectral_density(
@@ -1290,9 +1290,9 @@ def _snr_on_ring(r, u, signal, noise):
     """The largest ``S_x / S_n`` on the ring ``|nu| = r`` inside the band ``[-u, u]^2``:
     for isotropic spectra its value at ``(r, 0)``; for others the largest at
     ``_RING_POINTS`` angles on the ring's arc in the first quadrant, and in the second too
-    unless both are ``x_symmetric`` (``S(-nu) = S(nu)`` gives the other two). The point
-    ``(r, 0)`` can lie outside the band (``r > u``), where such spectra need not resemble
-    the band's. Traceable; no derivative flows through it (the tiers' choice)."""
+    unless both are ``x_symmetric`` (``_max_snr``). The point ``(r, 0)`` can lie outside
+    the band (``r > u``), where such spectra need not resemble the band's. Traceable; no
+    derivative flows through it (the tiers' choice)."""
     if signal.isotropic and noise.isotropic:
         return _snr_at(r, signal, noise)
     r, u = jax.lax.stop_gradient(r), jax.lax.stop_gradient(u)
@@ -1300,7 +1300,13 @@ def _snr_on_ring(r, u, signal, noise):
     ratio = jnp.clip(u / r, 0.0, 1.0)
     low, high = jnp.arccos(ratio), jnp.arcsin(ratio)
     theta = low + (high - low) * jnp.linspace(0.0, 1.0, _RING_POINTS, dtype=r.dtype)
-    nu_x, nu_y = r * jnp.cos(theta), r * jnp.sin(theta)
+    return _max_snr(r * jnp.cos(theta), r * jnp.sin(theta), signal, noise)
+
+
+def _max_snr(nu_x, nu_y, signal, noise):
+    """``max S_x / S_n`` over the points ``(nu_x, nu_y)`` of the band's first quadrant and,
+    for spectra that are not both ``x_symmetric``, over their mirror images
+    ``(-nu_x, nu_y)`` too (``S(-nu) = S(nu)`` gives the other two quadrants)."""
     if not (signal.x_symmetric and noise.x_symmetric):
         nu_x, nu_y = jnp.concatenate([nu_x, -nu_x]), jnp.concatenate([nu_y, nu_y])
     return jnp.max(signal(nu_x, nu_y) / noise(nu_x, nu_y))
@@ -2820,10 +2826,7 @@ def _peak_snr(u, signal, noise):
     spectra not ``x_symmetric``, in the spectra's dtype; one small compiled program
     (eager, the grid's spectra cost about 0.6 ms of every concrete call)."""
     axis = jnp.linspace(0.0, 1.0, 17) * u
-    nu_x, nu_y = jnp.meshgrid(axis, axis)
-    if not (signal.x_symmetric and noise.x_symmetric):
-        nu_x, nu_y = jnp.concatenate([nu_x, -nu_x]), jnp.concatenate([nu_y, nu_y])
-    return jnp.max(signal(nu_x, nu_y) / noise(nu_x, nu_y))
+    return _max_snr(*jnp.meshgrid(axis, axis), signal, noise)
 
 
 def _snr_peaks(peaks, tiers) -> bool:

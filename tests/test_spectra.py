@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import oracles
+import problems
 import pytest
 from compiled import fast_value_and_grad_in_everything
 from scipy import integrate
@@ -137,7 +138,7 @@ def test_overflowing_spectrum_under_jit_is_inf_not_nan():
 # Spectra that depend on the direction of nu (models of one's own)
 # --------------------------------------------------------------------------------------
 
-FIG1 = (jj.Seidel(w020=-2.75, w222=1.4089, w131=-1.2602, w040=1.5578, w220=2.7198), 0.95, 0.2)
+FIG1 = (jj.Seidel(**problems.FIG1), 0.95, 0.2)
 
 
 class _SkewNoise(jj.AbstractNoise):
@@ -221,7 +222,7 @@ def test_gradient_with_a_tilted_noise_is_the_finite_difference():
     signal = jj.MarkovSignal(1.0, 5.0)
 
     def merit(w020, variance, tilt):
-        ab = jj.Seidel(w020=w020, w222=1.4089, w131=-1.2602, w040=1.5578, w220=2.7198)
+        ab = jj.Seidel(**{**problems.FIG1, "w020": w020})
         return jj.jmse(ab, field, u, signal, _SkewNoise(variance, tilt, u))
 
     point = (-2.75, 1e-3, 0.6)
